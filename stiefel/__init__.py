@@ -1,0 +1,1 @@
+"""Optimisation on generalised Stiefel manifolds ``{X : XᵀMX = I}`` in JAX."""
