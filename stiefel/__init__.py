@@ -1,1 +1,26 @@
-"""Optimisation on generalised Stiefel manifolds ``{X : XᵀMX = I}`` in JAX."""
+"""Optimisation on generalised Stiefel manifolds ``{X ∈ R^{n×k} : XᵀMX = I}`` in JAX.
+
+Public API (MATH.md §1–3):
+
+* ``GeneralizedStiefel(M, k, metric=..., retraction=...)`` — the manifold.
+* ``SequentialConstraint`` — ``{x : ΦᵀMx = 0, xᵀMx = 1}`` for column-by-column solves.
+* ``strong_wolfe``, ``along_curve``, ``LineSearchStatus`` — the line search.
+* ``minimize`` (block solver) and ``minimize_sequential`` (thesis Algorithm 6).
+* ``Result``, ``SequentialResult``, ``Status``, ``History`` — solver outcomes.
+* ``as_operator``, ``shifted_inverse`` — SPD operators and preconditioners.
+* Errors: ``StiefelError`` and its subclasses.
+
+float64: the solvers compute in the dtype of the manifold's operator, which is
+float64 when JAX's x64 mode is on. Library code never changes JAX's global
+configuration; enable it in your program with
+``jax.config.update("jax_enable_x64", True)`` (or ``with jax.enable_x64(True):``),
+or pass ``dtype=jnp.float32`` explicitly to work in single precision.
+"""
+
+from .block_solver import METHODS, BlockOptions, minimize
+from .errors import NotSPDError, OffManifoldError, ShapeError, SolverError, StiefelError
+from .linesearch import LineSearchResult, LineSearchStatus, along_curve, strong_wolfe
+from .manifold import GeneralizedStiefel, skew, sym
+from .operators import DenseOperator, DiagonalOperator, LinearOperator, SparseOperator, as_operator
+from .preconditioning import as_preconditioner, preconditioned_gradient, shifted_inverse
+from .result import History, Result, SequentialResult, Status

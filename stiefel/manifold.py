@@ -1,0 +1,161 @@
+"""The generalised Stiefel manifold ``S_M = {X ∈ R^{n×k} : XᵀMX = I_k}`` (MATH.md §1, thesis §6.1)."""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float, PRNGKeyArray
+
+from .errors import OffManifoldError, ShapeError, StiefelError
+from .operators import LinearOperator, as_operator
+from .retractions import BLOCK_RETRACTIONS, RETRACTIONS, _inv_sqrt_spd
+
+__all__ = ["GeneralizedStiefel", "sym", "skew"]
+
+Point = Float[Array, "n k"]
+METRICS = ("euclidean", "canonical")
+
+
+def sym(B):
+    """``(B + Bᵀ)/2``."""
+    return 0.5 * (B + B.T)
+
+
+def skew(B):
+    """``(B − Bᵀ)/2``."""
+    return 0.5 * (B - B.T)
+
+
+class GeneralizedStiefel(eqx.Module):
+    """``{X : XᵀMX = I_k}`` for an SPD ``M`` (diagonal, dense or ``scipy.sparse``).
+
+    Args:
+      M: 1-D array (the diagonal of M), dense SPD ``(n, n)`` array, ``scipy.sparse``
+        SPD matrix (never densified; factored once for ``M⁻¹``), or a
+        ``stiefel.operators.LinearOperator``.
+      k: number of columns, ``1 ≤ k ≤ n``.
+      metric: ``"euclidean"`` (``tr(Z1ᵀMZ2)``) or ``"canonical"``
+        (``tr(Z1ᵀM(I − ½XXᵀM)Z2)``).
+      retraction: ``"cayley"`` (low-rank, default), ``"cholesky"``, ``"polar"``;
+        for ``k = 1`` also ``"radial"`` and ``"periodic"``.
+      check: validate that M is SPD (raises ``NotSPDError``).
+      dtype: dtype of the stored operator (default float64 when x64 is enabled).
+
+    Points are arrays of shape ``(n, k)``; all methods are pure and jittable.
+    """
+
+    op: LinearOperator
+    k: int = eqx.field(static=True)
+    metric: str = eqx.field(static=True)
+    retraction: str = eqx.field(static=True)
+
+    def __init__(self, M, k: int, *, metric: str = "euclidean", retraction: str = "cayley",
+                 check: bool = True, dtype=None):
+        op = as_operator(M, check=check, dtype=dtype)
+        n = op.n
+        if not isinstance(k, (int, np.integer)) or not 1 <= int(k) <= n:
+            raise ShapeError(f"k must be an integer with 1 ≤ k ≤ n = {n}, got k = {k!r}")
+        if metric not in METRICS:
+            raise StiefelError(f"unknown metric {metric!r}; choose one of {METRICS}")
+        if retraction not in RETRACTIONS:
+            raise StiefelError(f"unknown retraction {retraction!r}; choose one of {tuple(RETRACTIONS)}")
+        if retraction not in BLOCK_RETRACTIONS and int(k) > 1:
+            raise StiefelError(
+                f"the {retraction!r} retraction exists only for k = 1 (the ellipsoid xᵀMx = 1); "
+                f"it does not extend to k = {k} > 1 (thesis Rem. 6.4.23). Use 'cayley', 'cholesky' or 'polar', "
+                "or solve column by column with stiefel.minimize_sequential."
+            )
+        self.op = op
+        self.k = int(k)
+        self.metric = metric
+        self.retraction = retraction
+
+    # --- sizes -------------------------------------------------------------------------------
+    @property
+    def n(self) -> int:
+        return self.op.n
+
+    @property
+    def dim(self) -> int:
+        """Manifold dimension ``nk − k(k+1)/2``."""
+        return self.n * self.k - self.k * (self.k + 1) // 2
+
+    @property
+    def dtype(self):
+        return self.op.diagonal().dtype
+
+    # --- geometry ----------------------------------------------------------------------------
+    def proj(self, X: Point, Y: Point) -> Point:
+        """M-orthogonal projection of ambient ``Y`` onto ``T_X S_M``: ``Y − X sym(XᵀMY)``."""
+        return Y - X @ sym(X.T @ self.op.mv(Y))
+
+    def inner(self, X: Point, Z1: Point, Z2: Point) -> Float[Array, ""]:
+        """Metric on ``T_X S_M`` (Euclidean = M-weighted, or canonical)."""
+        MZ2 = self.op.mv(Z2)
+        value = jnp.sum(Z1 * MZ2)
+        if self.metric == "canonical":
+            value = value - 0.5 * jnp.sum((X.T @ self.op.mv(Z1)) * (X.T @ MZ2))
+        return value
+
+    def norm(self, X: Point, Z: Point) -> Float[Array, ""]:
+        return jnp.sqrt(jnp.maximum(self.inner(X, Z, Z), 0.0))
+
+    def egrad_to_rgrad(self, X: Point, G: Point) -> Point:
+        """Riemannian gradient from the Euclidean partial derivative ``G = ∂F/∂X`` (MATH.md §1).
+
+        Euclidean metric: ``M⁻¹G − X sym(XᵀG)``; canonical: ``M⁻¹G − X GᵀX``.
+        """
+        MinvG = self.op.solve(G)
+        if self.metric == "canonical":
+            return MinvG - X @ (G.T @ X)
+        return MinvG - X @ sym(X.T @ G)
+
+    def retract(self, X: Point, Z: Point) -> Point:
+        """``R_X(Z)`` with the manifold's retraction."""
+        return RETRACTIONS[self.retraction](self.op, X, Z)
+
+    def transport(self, X_new: Point, Z: Point) -> Point:
+        """Vector transport by projection onto ``T_{X_new}``."""
+        return self.proj(X_new, Z)
+
+    # --- points ------------------------------------------------------------------------------
+    def project_to_manifold(self, Y: Point) -> Point:
+        """The M-closest point of ``S_M`` to a full-rank ``Y``: ``Y (YᵀMY)^{-1/2}``."""
+        return Y @ _inv_sqrt_spd(Y.T @ self.op.mv(Y))
+
+    def random_point(self, key: PRNGKeyArray) -> Point:
+        """A random point (Gaussian ``Y`` projected to the manifold)."""
+        Y = jax.random.normal(key, (self.n, self.k), dtype=self.dtype)
+        return self.project_to_manifold(Y)
+
+    def random_tangent(self, key: PRNGKeyArray, X: Point) -> Point:
+        """A random tangent vector at ``X`` of unit norm in the manifold's metric."""
+        Z = self.proj(X, jax.random.normal(key, X.shape, dtype=X.dtype))
+        return Z / self.norm(X, Z)
+
+    def dist_to_manifold(self, X: Point) -> Float[Array, ""]:
+        """``max |XᵀMX − I|``."""
+        return jnp.max(jnp.abs(X.T @ self.op.mv(X) - jnp.eye(X.shape[1], dtype=X.dtype)))
+
+    def check_point(self, X, *, atol: float = 1e-8, name: str = "X0") -> None:
+        """Raise ``ShapeError``/``OffManifoldError`` unless ``X`` is an ``(n, k)`` point of S_M (host-side)."""
+        shape = tuple(np.shape(X))
+        if shape != (self.n, self.k):
+            raise ShapeError(f"{name} must have shape (n, k) = {(self.n, self.k)}, got {shape}")
+        Xj = jnp.asarray(X, dtype=self.dtype)
+        if not bool(jnp.all(jnp.isfinite(Xj))):
+            raise OffManifoldError(f"{name} has non-finite entries")
+        err = float(self.dist_to_manifold(Xj))
+        if not err <= atol:
+            raise OffManifoldError(
+                f"{name} is off the manifold: max|XᵀMX − I| = {err:.3e} > {atol:.1e}; "
+                "use manifold.project_to_manifold(X) to move it onto the manifold"
+            )
+
+    # pymanopt-style aliases, documented once.
+    projection = proj
+    inner_product = inner
+    euclidean_to_riemannian_gradient = egrad_to_rgrad
+    retraction_map = retract

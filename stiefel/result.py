@@ -1,0 +1,138 @@
+"""Solver outcomes: status codes, per-iteration history, the result object."""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float, Int
+
+from .errors import SolverError
+
+__all__ = ["Status", "History", "Result", "SequentialResult"]
+
+
+class Status:
+    """Integer codes of ``Result.status``."""
+
+    CONVERGED = 0  #: gradient norm ≤ gtol (or step ≤ xtol)
+    MAX_ITERS = 1  #: ran out of iterations
+    LINE_SEARCH_FAILED = 2  #: no acceptable step along a descent direction
+    NON_FINITE = 3  #: the objective or its gradient became non-finite (last finite iterate kept)
+
+    names = ("converged", "max_iters", "line_search_failed", "non_finite")
+
+    @classmethod
+    def name(cls, code) -> str:
+        return cls.names[int(code)]
+
+
+class History(eqx.Module):
+    """Per-iteration record; entry 0 is the start, entries past ``iterations`` are NaN.
+
+    value: objective; grad_norm: Riemannian gradient norm (manifold metric);
+    step: accepted step length τ (entry 0 is 0).
+    """
+
+    value: Float[Array, "... T"]
+    grad_norm: Float[Array, "... T"]
+    step: Float[Array, "... T"]
+
+    @staticmethod
+    def empty(length: int, dtype, lead: tuple = ()) -> "History":
+        nan = jnp.full(lead + (length,), jnp.nan, dtype=dtype)
+        return History(nan, nan, nan)
+
+    def record(self, i, value, grad_norm, step) -> "History":
+        return History(
+            self.value.at[..., i].set(value),
+            self.grad_norm.at[..., i].set(grad_norm),
+            self.step.at[..., i].set(step),
+        )
+
+
+class Result(eqx.Module):
+    """Outcome of ``stiefel.minimize``.
+
+    Attributes:
+      x: final point ``(n, k)`` (the last iterate with a finite objective).
+      value: ``F(x)``; grad_norm: Riemannian gradient norm at ``x``.
+      iterations: iterations taken; status: a ``Status`` code.
+      history: ``History`` of length ``max_iters + 1``.
+      stats: counters (objective/gradient evaluations, line-search trials, ...).
+      wall_time: seconds for the solve (compiled), compile_time: seconds to trace and compile.
+    """
+
+    x: Float[Array, "n k"]
+    value: Float[Array, ""]
+    grad_norm: Float[Array, ""]
+    iterations: Int[Array, ""]
+    status: Int[Array, ""]
+    history: History
+    stats: dict
+    wall_time: float = 0.0
+    compile_time: float = 0.0
+
+    @property
+    def status_name(self) -> str:
+        return Status.name(self.status)
+
+    @property
+    def converged(self) -> bool:
+        return int(self.status) == Status.CONVERGED
+
+    def trimmed_history(self) -> dict:
+        """History as numpy arrays cut to ``iterations + 1`` entries."""
+        t = int(self.iterations) + 1
+        return {f: np.asarray(getattr(self.history, f))[..., :t] for f in ("value", "grad_norm", "step")}
+
+    def raise_for_status(self) -> "Result":
+        """Raise ``SolverError`` unless the solver converged (or only ran out of iterations)."""
+        if int(self.status) in (Status.LINE_SEARCH_FAILED, Status.NON_FINITE):
+            raise SolverError(
+                f"solver stopped with status {self.status_name!r} after {int(self.iterations)} iterations "
+                f"(objective {float(self.value):.6e}, gradient norm {float(self.grad_norm):.3e})"
+            )
+        return self
+
+
+class SequentialResult(eqx.Module):
+    """Outcome of ``stiefel.minimize_sequential``: one column at a time (thesis Algorithm 6).
+
+    Attributes:
+      x: ``(n, k)`` columns, M-orthonormal.
+      value: ``Σ_j f(x_j)``; values: ``(k,)`` per-column objective.
+      grad_norm, iterations, status: ``(k,)`` per column.
+      history: ``History`` with leading axis ``k``.
+      wall_time: total seconds; column_times: ``(k,)`` seconds per column.
+    """
+
+    x: Float[Array, "n k"]
+    value: Float[Array, ""]
+    values: Float[Array, " k"]
+    grad_norm: Float[Array, " k"]
+    iterations: Int[Array, " k"]
+    status: Int[Array, " k"]
+    history: History
+    stats: dict
+    wall_time: float = 0.0
+    compile_time: float = 0.0
+    column_times: tuple = ()
+
+    @property
+    def status_names(self) -> list[str]:
+        return [Status.name(s) for s in np.asarray(self.status)]
+
+    @property
+    def converged(self) -> bool:
+        return bool(np.all(np.asarray(self.status) == Status.CONVERGED))
+
+    def raise_for_status(self) -> "SequentialResult":
+        bad = [j for j, s in enumerate(np.asarray(self.status)) if s in (Status.LINE_SEARCH_FAILED, Status.NON_FINITE)]
+        if bad:
+            j = bad[0]
+            raise SolverError(
+                f"column {j} stopped with status {Status.name(self.status[j])!r} after "
+                f"{int(self.iterations[j])} iterations"
+            )
+        return self
