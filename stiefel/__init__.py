@@ -24,3 +24,4 @@ from .manifold import GeneralizedStiefel, skew, sym
 from .operators import DenseOperator, DiagonalOperator, LinearOperator, SparseOperator, as_operator
 from .preconditioning import as_preconditioner, preconditioned_gradient, shifted_inverse
 from .result import History, Result, SequentialResult, Status
+from .sequential import DIRECTIONS, SequentialConstraint, SequentialOptions, minimize_sequential

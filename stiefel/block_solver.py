@@ -121,7 +121,7 @@ def _core(F, manifold: GeneralizedStiefel, P, X0, opts: BlockOptions):
         guess = jnp.where(jnp.isfinite(guess) & (guess > 0), guess, c.step)
         tau0 = jnp.minimum(guess, xi_norm_cap / eta_norm)
         phi = along_curve(F, lambda t: manifold.retract(c.X, t * eta))
-        ls = strong_wolfe(phi, c.F, slope, tau0, c1=c1, c2=c2, max_evals=ls_max_evals)
+        ls = strong_wolfe(phi, c.F, slope, tau0, c1=c1, c2=c2, max_evals=ls_max_evals, value_scale=F0)
         X_new = manifold.retract(c.X, ls.step * eta)
         return X_new, ls.step, ls.accepted, ls.n_evals, eta, restart
 

@@ -118,6 +118,7 @@ def strong_wolfe(
     backtrack_factor: float = 0.1,
     approx_tol: float = 1e-12,
     approx_c2: float = 0.9,
+    value_scale: Float[Array, ""] | float = 0.0,
 ) -> LineSearchResult:
     """Find ``τ > 0`` with ``h(τ) ≤ h(0) + c1 τ h'(0)`` and ``|h'(τ)| ≤ c2 |h'(0)|``.
 
@@ -129,8 +130,10 @@ def strong_wolfe(
       max_step: largest step (e.g. π/2 for the periodic retraction, Cor. 6.4.25).
       max_evals: evaluations for bracketing + zoom; then up to ``max_backtrack``
         backtracking-Armijo evaluations.
-      approx_tol, approx_c2: the approximate Wolfe test accepts
-        ``|h(τ) − h(0)| ≤ approx_tol·|h(0)|`` (the change is at rounding level) with
+      approx_tol, approx_c2, value_scale: the approximate Wolfe test accepts
+        ``|h(τ) − h(0)| ≤ approx_tol·(|h(0)| + value_scale)`` (the change is at
+        rounding level; ``value_scale`` is the typical size of the objective's
+        terms, e.g. its value at the start, for objectives whose minimum is 0) with
         ``approx_c2·h'(0) ≤ h'(τ) ≤ (1 − 2c1)|h'(0)|`` (Hager–Zhang's σ = 0.9).
     Returns:
       A ``LineSearchResult``; ``status`` says which conditions held
@@ -144,7 +147,7 @@ def strong_wolfe(
     max_step = jnp.asarray(max_step, dtype)
     a0 = jnp.minimum(jnp.asarray(init_step, dtype), max_step)
     valid = jnp.isfinite(phi0) & jnp.isfinite(dphi0) & (dphi0 < 0) & (a0 > 0)
-    f_tol = approx_tol * (jnp.abs(phi0) + jnp.finfo(dtype).tiny)
+    f_tol = approx_tol * (jnp.abs(phi0) + jnp.abs(jnp.asarray(value_scale, dtype)) + jnp.finfo(dtype).tiny)
 
     init = _State(
         stage=jnp.where(valid, 0, 3),
