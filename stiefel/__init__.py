@@ -13,8 +13,10 @@ Public API (MATH.md §1–3):
 float64: the solvers compute in the dtype of the manifold's operator, which is
 float64 when JAX's x64 mode is on. Library code never changes JAX's global
 configuration; enable it in your program with
-``jax.config.update("jax_enable_x64", True)`` (or ``with jax.enable_x64(True):``),
-or pass ``dtype=jnp.float32`` explicitly to work in single precision.
+``jax.config.update("jax_enable_x64", True)``, or pass ``dtype=jnp.float32``
+explicitly to work in single precision. (The thread-local ``jax.enable_x64``
+context works for diagonal and dense M, but sparse solves run as host
+callbacks, which see only the global flag.)
 """
 
 from .block_solver import METHODS, BlockOptions, minimize

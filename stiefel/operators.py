@@ -114,9 +114,11 @@ class _HostFactor:
         self.dtype = dtype
 
     def __call__(self, b: np.ndarray) -> np.ndarray:
-        b = np.asarray(b)
-        out = self.lu.solve(np.ascontiguousarray(b, dtype=np.float64))
-        return out.astype(b.dtype, copy=False)
+        # Host callbacks see JAX's *global* x64 flag: under the thread-local
+        # ``jax.enable_x64`` context the argument may arrive as float32. Return the
+        # traced dtype regardless; for full float64 accuracy set the global flag.
+        out = self.lu.solve(np.ascontiguousarray(np.asarray(b), dtype=np.float64))
+        return out.astype(self.dtype, copy=False)
 
 
 class SparseOperator(LinearOperator):

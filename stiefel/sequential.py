@@ -303,9 +303,14 @@ def minimize_sequential(
     for j in range(k):
         S = SequentialConstraint(op, Phi)
         y = X0[:, j] if X0 is not None else jax.random.normal(keys[j], (n,), dtype=dt)
+        if X0 is not None:
+            z = S._complement(y)
+            if not float(jnp.dot(z, op.mv(z))) > 1e-16 * float(jnp.dot(y, op.mv(y))):
+                raise StiefelError(
+                    f"X0[:, {j}] lies in the span of the previous columns (found so far); "
+                    "cannot start there: give linearly independent start columns"
+                )
         x0 = S.project(y)
-        if X0 is not None and not bool(jnp.all(jnp.isfinite(x0))):
-            raise StiefelError(f"X0[:, {j}] lies in the span of the previous columns; cannot start there")
         res, t_compile, t_run = run_compiled(_column_core, f, op, P, Phi, active, x0, opts)
         x, fx, gn, it, st, h, nf, nr = res
         compile_total += t_compile

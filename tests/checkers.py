@@ -1,0 +1,41 @@
+"""Reusable checkers (after Manopt's checkretraction / checkgradient)."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+
+def check_retraction(manifold, X, Z, *, jvp_tol=1e-10, dist_tol=1e-12, norms=(1e-6, 1e-3, 1.0, 1e3)):
+    """R_X(0) = X, d/dτ R_X(τZ)|₀ = Z (by jax.jvp), and R_X(sZ) on the manifold for every norm s."""
+    R0 = manifold.retract(X, jnp.zeros_like(Z))
+    assert float(jnp.max(jnp.abs(R0 - X))) <= 1e-14, "R_X(0) != X"
+    _, velocity = jax.jvp(lambda t: manifold.retract(X, t * Z), (0.0,), (1.0,))
+    err = float(jnp.max(jnp.abs(velocity - Z)))
+    assert err <= jvp_tol, f"d/dτ R_X(τZ) at 0 differs from Z by {err:.2e}"
+    unit = Z / manifold.norm(X, Z)
+    for s in norms:
+        dist = float(manifold.dist_to_manifold(manifold.retract(X, s * unit)))
+        assert dist <= dist_tol, f"R_X(Z) off the manifold by {dist:.2e} at ‖Z‖ = {s:g}"
+
+
+def check_gradient(F, manifold, X, key, *, tol=1e-10):
+    """⟨grad F, Z⟩ = DF(X)[Z] (jax.jvp) for random tangent Z, grad tangent, and the first-order
+    Taylor remainder of F along R_X(tZ) decays with slope 2 in log-log."""
+    G = jax.grad(F)(X)
+    xi = manifold.egrad_to_rgrad(X, G)
+    skew_err = float(jnp.max(jnp.abs(X.T @ manifold.op.mv(xi) + (X.T @ manifold.op.mv(xi)).T)))
+    assert skew_err <= 1e-10, f"gradient not tangent: |sym(XᵀMξ)| = {skew_err:.2e}"
+    for sub in jax.random.split(key, 3):
+        Z = manifold.random_tangent(sub, X)
+        _, dF = jax.jvp(F, (X,), (Z,))
+        lhs = float(manifold.inner(X, xi, Z))
+        assert abs(lhs - float(dF)) <= tol * max(1.0, abs(float(dF))), f"⟨grad, Z⟩ = {lhs} vs DF[Z] = {float(dF)}"
+    # Taylor remainder |F(R(tZ)) − F(X) − t⟨grad, Z⟩| = O(t²)
+    Z = manifold.random_tangent(key, X)
+    slope_term = float(manifold.inner(X, xi, Z))
+    ts = np.logspace(-4, -1, 7)
+    rem = [abs(float(F(manifold.retract(X, t * Z))) - float(F(X)) - t * slope_term) for t in ts]
+    slope = np.polyfit(np.log(ts), np.log(np.maximum(rem, 1e-300)), 1)[0]
+    assert 1.8 <= slope <= 2.3 or max(rem) < 1e-12, f"Taylor remainder slope {slope:.2f}, expected 2"

@@ -1,0 +1,96 @@
+"""Block solvers: tr(XᵀWX) over S_M reaches the sum of the k smallest generalised eigenvalues."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg as sla
+
+from stiefel import (GeneralizedStiefel, OffManifoldError, ShapeError, SolverError, Status, StiefelError,
+                     as_operator, minimize, shifted_inverse)
+
+from stiefel_cases import grid_laplacian, metric_matrix
+
+K = 4
+
+
+@pytest.fixture(scope="module")
+def problem():
+    W = grid_laplacian(8)
+    M = metric_matrix("diagonal", W.shape[0], seed=3)
+    vals = sla.eigsh(sp.csc_matrix(W), k=K, M=sp.diags(M).tocsc(), sigma=-1e-6, which="LM")[0]
+    Wop = as_operator(W, check=False, factor=False)
+    F = lambda X: jnp.sum(X * Wop.mv(X))  # noqa: E731
+    return W, M, F, float(np.sum(vals))
+
+
+@pytest.mark.parametrize("method", ["cg", "bb"])
+@pytest.mark.parametrize("retraction", ["cayley", "cholesky", "polar"])
+def test_trace_minimisation_preconditioned(problem, method, retraction):
+    W, M, F, target = problem
+    S = GeneralizedStiefel(M, K, retraction=retraction)
+    X0 = S.random_point(jax.random.PRNGKey(0))
+    res = minimize(F, S, X0, method=method, gtol=1e-9, max_iters=500, preconditioner=shifted_inverse(W, M, 0.05))
+    assert res.converged, res.status_name
+    assert abs(float(res.value) - target) <= 1e-10 * target
+    assert float(S.dist_to_manifold(res.x)) <= 1e-12
+    assert int(res.iterations) < 150
+
+
+@pytest.mark.parametrize("method", ["cg", "bb"])
+@pytest.mark.parametrize("metric", ["euclidean", "canonical"])
+def test_trace_minimisation_plain(problem, method, metric):
+    W, M, F, target = problem
+    S = GeneralizedStiefel(M, K, metric=metric, retraction="cholesky")
+    X0 = S.random_point(jax.random.PRNGKey(1))
+    res = minimize(F, S, X0, method=method, gtol=1e-8, max_iters=5000)
+    assert res.converged, res.status_name
+    assert abs(float(res.value) - target) <= 1e-10 * target
+    h = res.trimmed_history()
+    assert h["value"][0] == pytest.approx(float(F(X0)))
+    assert len(h["value"]) == int(res.iterations) + 1 and np.all(np.isfinite(h["value"]))
+    if method == "cg":  # monotone line search
+        assert np.all(np.diff(h["value"]) <= 1e-12 * target)
+
+
+def test_sparse_metric_and_result_fields(problem):
+    W, _, F, _ = problem
+    M = metric_matrix("sparse", W.shape[0], seed=4)
+    S = GeneralizedStiefel(M, K)
+    vals = sla.eigsh(sp.csc_matrix(W), k=K, M=sp.csc_matrix(M), sigma=-1e-6, which="LM")[0]
+    res = minimize(F, S, S.random_point(jax.random.PRNGKey(2)), gtol=1e-9, max_iters=500,
+                   preconditioner=shifted_inverse(W, M, 0.05))
+    assert res.converged and abs(float(res.value) - vals.sum()) <= 1e-10 * vals.sum()
+    assert res.stats["n_fevals"] >= int(res.iterations) and res.wall_time > 0 and res.compile_time >= 0
+
+
+def test_max_iters_and_non_finite_status(problem):
+    W, M, F, _ = problem
+    S = GeneralizedStiefel(M, K)
+    X0 = S.random_point(jax.random.PRNGKey(3))
+    res = minimize(F, S, X0, gtol=1e-14, max_iters=3)
+    assert int(res.status) == Status.MAX_ITERS and int(res.iterations) == 3
+    bad = lambda X: F(X) * jnp.nan  # noqa: E731
+    res = minimize(bad, S, X0, max_iters=10)
+    assert int(res.status) == Status.NON_FINITE and int(res.iterations) == 0
+    assert np.all(np.isfinite(np.asarray(res.x)))
+    with pytest.raises(SolverError, match="non_finite"):
+        minimize(bad, S, X0, max_iters=10, throw=True)
+
+
+def test_bad_start_and_options(problem):
+    W, M, F, _ = problem
+    S = GeneralizedStiefel(M, K)
+    X0 = S.random_point(jax.random.PRNGKey(4))
+    with pytest.raises(OffManifoldError, match="project_to_manifold"):
+        minimize(F, S, 2.0 * X0)
+    with pytest.raises(ShapeError, match="shape"):
+        minimize(F, S, X0[:, :2])
+    with pytest.raises(OffManifoldError, match="non-finite"):
+        minimize(F, S, X0.at[0, 0].set(jnp.nan))
+    with pytest.raises(StiefelError, match="unknown method"):
+        minimize(F, S, X0, method="newton")
+    # project_to_manifold fixes the start
+    res = minimize(F, S, S.project_to_manifold(2.0 * X0 + 0.1), max_iters=2)
+    assert int(res.status) in (Status.MAX_ITERS, Status.CONVERGED)

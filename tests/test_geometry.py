@@ -1,0 +1,116 @@
+"""Tangent projection, metrics and Riemannian gradients (MATH.md §1, errata 1)."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from stiefel import GeneralizedStiefel, preconditioned_gradient, SequentialConstraint, as_operator
+
+from checkers import check_gradient
+from stiefel_cases import M_KINDS, dense_of, metric_matrix
+
+N, K = 12, 3
+
+
+def objective(n, k, seed=0):
+    """A generic smooth non-quadratic F(X)."""
+    rng = np.random.default_rng(seed)
+    A = rng.standard_normal((n, n))
+    A = jnp.asarray(A + A.T)
+    B = jnp.asarray(rng.standard_normal((k, k)))
+    C = jnp.asarray(rng.standard_normal((n, k)))
+    return lambda X: jnp.sum(X * (A @ X @ B)) + jnp.sum(jnp.sin(X * C)) + jnp.sum(X**4)
+
+
+@pytest.mark.parametrize("kind", M_KINDS)
+@pytest.mark.parametrize("metric", ["euclidean", "canonical"])
+def test_riemannian_gradient_is_the_directional_derivative(kind, metric):
+    S = GeneralizedStiefel(metric_matrix(kind, N), K, metric=metric)
+    X = S.random_point(jax.random.PRNGKey(0))
+    check_gradient(objective(N, K), S, X, jax.random.PRNGKey(1))
+
+
+@pytest.mark.parametrize("kind", M_KINDS)
+def test_projection_is_tangent_idempotent_and_M_orthogonal(kind):
+    M = metric_matrix(kind, N)
+    S = GeneralizedStiefel(M, K)
+    X = S.random_point(jax.random.PRNGKey(2))
+    Y = jax.random.normal(jax.random.PRNGKey(3), X.shape)
+    PY = S.proj(X, Y)
+    XtMZ = X.T @ S.op.mv(PY)
+    assert float(jnp.max(jnp.abs(XtMZ + XtMZ.T))) < 1e-12
+    np.testing.assert_allclose(S.proj(X, PY), PY, atol=1e-12)
+    # the residual Y − PY is M-orthogonal to every tangent vector
+    Z = S.random_tangent(jax.random.PRNGKey(4), X)
+    assert abs(float(jnp.sum((Y - PY) * S.op.mv(Z)))) < 1e-12
+
+
+def test_metrics_differ_only_on_rotations():
+    """Canonical metric halves the weight of the XᵀMZ (rotation) part (MATH.md §1)."""
+    M = metric_matrix("diagonal", N)
+    Se, Sc = GeneralizedStiefel(M, K), GeneralizedStiefel(M, K, metric="canonical")
+    X = Se.random_point(jax.random.PRNGKey(5))
+    Om = jnp.asarray([[0.0, 1.0, -2.0], [-1.0, 0.0, 0.5], [2.0, -0.5, 0.0]])
+    Z_rot = X @ Om  # XᵀM(XΩ) = Ω skew: a pure rotation
+    assert abs(float(Sc.inner(X, Z_rot, Z_rot)) - 0.5 * float(Se.inner(X, Z_rot, Z_rot))) < 1e-12
+    Y = jax.random.normal(jax.random.PRNGKey(6), X.shape)
+    Z_perp = Y - X @ (X.T @ Se.op.mv(Y))  # XᵀMZ = 0
+    assert abs(float(Sc.inner(X, Z_perp, Z_perp)) - float(Se.inner(X, Z_perp, Z_perp))) < 1e-12
+
+
+@pytest.mark.parametrize("kind", M_KINDS)
+def test_preconditioned_gradient_in_its_metric(kind):
+    """g_P(ξ, Z) = tr(ξᵀP⁻¹Z) = tr(GᵀZ) for tangent Z, ξ tangent; P = M⁻¹ gives grad_e."""
+    M = metric_matrix(kind, N)
+    S = GeneralizedStiefel(M, K)
+    X = S.random_point(jax.random.PRNGKey(7))
+    G = jax.grad(objective(N, K))(X)
+    rng = np.random.default_rng(8)
+    B = rng.standard_normal((N, N))
+    K_mat = B @ B.T + N * np.eye(N)  # P = K⁻¹
+    P = as_operator(K_mat)
+    xi = preconditioned_gradient(S.op, P.solve, X, G)
+    XtMxi = X.T @ S.op.mv(xi)
+    assert float(jnp.max(jnp.abs(XtMxi + XtMxi.T))) < 1e-11
+    for sub in jax.random.split(jax.random.PRNGKey(9), 3):
+        Z = S.random_tangent(sub, X)
+        np.testing.assert_allclose(jnp.sum(xi * (K_mat @ Z)), jnp.sum(G * Z), rtol=1e-10, atol=1e-12)
+    xi_M = preconditioned_gradient(S.op, S.op.solve, X, G)
+    np.testing.assert_allclose(xi_M, S.egrad_to_rgrad(X, G), atol=1e-11)
+
+
+@pytest.mark.parametrize("kind", M_KINDS)
+def test_sequential_constraint_set(kind):
+    """{x : ΦᵀMx = 0, xᵀMx = 1}: projection, tangent projector, gradient (MATH.md §2)."""
+    M = metric_matrix(kind, N)
+    S = GeneralizedStiefel(M, K)
+    Phi = S.random_point(jax.random.PRNGKey(10))
+    C = SequentialConstraint(M, Phi)
+    Md = dense_of(M)
+    x = C.project(jax.random.normal(jax.random.PRNGKey(11), (N,)))
+    np.testing.assert_allclose(Phi.T @ Md @ x, 0, atol=1e-12)
+    assert abs(float(x @ Md @ x) - 1) < 1e-12
+    v = jax.random.normal(jax.random.PRNGKey(12), (N,))
+    z = C.proj(x, v)
+    np.testing.assert_allclose(jnp.concatenate([Phi.T @ Md @ z, jnp.atleast_1d(x @ Md @ z)]), 0, atol=1e-12)
+    np.testing.assert_allclose(C.proj(x, z), z, atol=1e-12)
+    f = lambda y: jnp.sum(jnp.cos(y)) + y @ jnp.arange(N, dtype=y.dtype) * y.sum()  # noqa: E731
+    xi = C.egrad_to_rgrad(x, jax.grad(f)(x))
+    _, df = jax.jvp(f, (x,), (z,))
+    np.testing.assert_allclose(C.inner(x, xi, z), df, rtol=1e-10)
+    y = C.retract(x, 0.7 * z / jnp.sqrt(C.inner(x, z, z)))
+    np.testing.assert_allclose(Phi.T @ Md @ y, 0, atol=1e-12)
+    assert abs(float(y @ Md @ y) - 1) < 1e-12
+
+
+@settings(max_examples=12, deadline=None)
+@given(n=st.integers(3, 14), data=st.data(), seed=st.integers(0, 2**16),
+       kind=st.sampled_from(M_KINDS), metric=st.sampled_from(["euclidean", "canonical"]))
+def test_gradient_identity_over_shapes(n, data, seed, kind, metric):
+    k = data.draw(st.integers(1, min(n, 4)))
+    S = GeneralizedStiefel(metric_matrix(kind, n, seed=seed), k, metric=metric, retraction="polar")
+    X = S.random_point(jax.random.PRNGKey(seed))
+    check_gradient(objective(n, k, seed), S, X, jax.random.PRNGKey(seed + 1))

@@ -1,0 +1,76 @@
+"""SPD operators: products and solves against dense references; sparse stays sparse."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from stiefel import DenseOperator, DiagonalOperator, NotSPDError, ShapeError, SparseOperator, as_operator
+
+from stiefel_cases import M_KINDS, dense_of, metric_matrix
+
+
+@pytest.mark.parametrize("kind", M_KINDS)
+def test_mv_and_solve_match_dense(kind):
+    M = metric_matrix(kind, 13, seed=1)
+    Md = dense_of(M)
+    op = as_operator(M)
+    X = np.random.default_rng(2).standard_normal((13, 4))
+    np.testing.assert_allclose(op.mv(jnp.asarray(X)), Md @ X, atol=1e-13)
+    np.testing.assert_allclose(op.solve(jnp.asarray(X)), np.linalg.solve(Md, X), atol=1e-12)
+    np.testing.assert_allclose(op.mv(jnp.asarray(X[:, 0])), Md @ X[:, 0], atol=1e-13)
+    np.testing.assert_allclose(op.diagonal(), np.diag(Md), atol=0)
+
+
+def test_kinds_are_chosen_by_input():
+    assert isinstance(as_operator(metric_matrix("diagonal", 5)), DiagonalOperator)
+    assert isinstance(as_operator(metric_matrix("dense", 5)), DenseOperator)
+    op = as_operator(metric_matrix("sparse", 5))
+    assert isinstance(op, SparseOperator) and op.width == 3  # tridiagonal: 3 slots per row, not n
+
+
+def test_sparse_solve_is_jittable_and_differentiable():
+    M = metric_matrix("sparse", 11)
+    op = as_operator(M)
+    Y = jnp.asarray(np.random.default_rng(0).standard_normal((11, 2)))
+    Md = dense_of(M)
+    np.testing.assert_allclose(jax.jit(lambda y: op.solve(y))(Y), np.linalg.solve(Md, Y), atol=1e-12)
+    # d/dY sum(M⁻¹Y ⊙ C) = M⁻¹C (M symmetric)
+    C = jnp.asarray(np.random.default_rng(1).standard_normal((11, 2)))
+    g = jax.grad(lambda y: jnp.sum(op.solve(y) * C))(Y)
+    np.testing.assert_allclose(g, np.linalg.solve(Md, C), atol=1e-12)
+    v = jax.vmap(op.solve, in_axes=1, out_axes=1)(Y)
+    np.testing.assert_allclose(v, np.linalg.solve(Md, Y), atol=1e-12)
+
+
+def test_sparse_matvec_on_irregular_rows():
+    rng = np.random.default_rng(3)
+    A = sp.random(40, 40, density=0.1, random_state=4, format="csr")
+    A = A + A.T + sp.diags(rng.uniform(5, 6, 40))
+    op = SparseOperator.from_scipy(A)
+    X = rng.standard_normal((40, 3))
+    np.testing.assert_allclose(op.mv(jnp.asarray(X)), A @ X, atol=1e-12)
+    assert sp.issparse(op.to_scipy())
+
+
+@pytest.mark.parametrize(
+    "M, message",
+    [
+        (np.array([1.0, -2.0, 3.0]), "positive"),
+        (np.array([1.0, np.nan, 3.0]), "non-finite"),
+        (np.array([[2.0, 1.0], [0.0, 2.0]]), "not symmetric"),
+        (np.array([[1.0, 2.0], [2.0, 1.0]]), "not positive definite"),
+        (sp.csr_matrix(np.array([[1.0, 2.0, 0], [2.0, 1.0, 0], [0, 0, 1.0]])), "not positive definite"),
+        (sp.csr_matrix(np.array([[1.0, 0.5], [0.0, 1.0]])), "not symmetric"),
+        (sp.csr_matrix(np.array([[1.0, 1.0], [1.0, 1.0]])), "M"),
+    ],
+)
+def test_non_spd_is_rejected_with_a_named_error(M, message):
+    with pytest.raises(NotSPDError, match=message):
+        as_operator(M)
+
+
+def test_non_square_is_rejected():
+    with pytest.raises(ShapeError):
+        as_operator(np.ones((3, 4)))
