@@ -3,3 +3,9 @@
 import jax
 
 jax.config.update("jax_enable_x64", True)
+
+from hypothesis import settings  # noqa: E402
+
+# Deterministic property tests in CI: the same examples on every run.
+settings.register_profile("ci", derandomize=True, deadline=None, print_blob=True)
+settings.load_profile("ci")

@@ -114,3 +114,24 @@ def test_gradient_identity_over_shapes(n, data, seed, kind, metric):
     S = GeneralizedStiefel(metric_matrix(kind, n, seed=seed), k, metric=metric, retraction="polar")
     X = S.random_point(jax.random.PRNGKey(seed))
     check_gradient(objective(n, k, seed), S, X, jax.random.PRNGKey(seed + 1))
+
+
+class _ThesisSlip:
+    """The manifold with erratum 1 re-introduced: the gradient projects G itself, without M⁻¹."""
+
+    def __init__(self, S):
+        self._S = S
+
+    def __getattr__(self, name):
+        return getattr(self._S, name)
+
+    def egrad_to_rgrad(self, X, G):
+        return self._S.proj(X, G)
+
+
+def test_checker_rejects_the_thesis_gradient_slip():
+    """MATH.md erratum 1: proj(G) is not the gradient for non-uniform M; the checker must notice."""
+    S = GeneralizedStiefel(metric_matrix("diagonal", N), K)
+    X = S.random_point(jax.random.PRNGKey(0))
+    with pytest.raises(AssertionError):
+        check_gradient(objective(N, K), _ThesisSlip(S), X, jax.random.PRNGKey(1))
