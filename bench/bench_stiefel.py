@@ -83,6 +83,10 @@ def main(argv=None):
             for retraction in ("cayley", "cholesky", "polar"):
                 cases.append(("block", dict(method=method, retraction=retraction), precond))
 
+    # warm-up: the first execution in a process pays a one-off runtime start (~1 s)
+    Wt = grid_laplacian(5)
+    run_case("sequential", Wt, np.ones(25), np.array([0.0, 0.1, 0.2]), gtol=1e-6, max_iters=5, precond=False,
+             direction="gd")
     rows = []
     for m in args.sizes:
         W = grid_laplacian(m)

@@ -24,6 +24,12 @@ from .errors import NotSPDError, OffManifoldError, ShapeError, SolverError, Stie
 from .linesearch import LineSearchResult, LineSearchStatus, along_curve, strong_wolfe
 from .manifold import GeneralizedStiefel, skew, sym
 from .operators import DenseOperator, DiagonalOperator, LinearOperator, SparseOperator, as_operator
-from .preconditioning import as_preconditioner, preconditioned_gradient, shifted_inverse
+from .preconditioning import (
+    PRECONDITIONING_MODES,
+    as_preconditioner,
+    preconditioned_gradient,
+    preconditioned_residual,
+    shifted_inverse,
+)
 from .result import History, Result, SequentialResult, Status
 from .sequential import DIRECTIONS, SequentialConstraint, SequentialOptions, minimize_sequential

@@ -28,7 +28,7 @@ from ._compile import run_compiled
 from .errors import StiefelError
 from .linesearch import LineSearchStatus, along_curve, strong_wolfe
 from .manifold import GeneralizedStiefel, sym
-from .preconditioning import as_preconditioner, preconditioned_gradient
+from .preconditioning import PRECONDITIONING_MODES, as_preconditioner, preconditioned_gradient, preconditioned_residual
 from .result import History, Result, Status
 
 __all__ = ["minimize", "BlockOptions", "METHODS"]
@@ -73,6 +73,7 @@ class BlockOptions:
     init_step: float = 1.0
     max_move: float = 1.0
     bb_gamma: float = 0.85
+    precondition: str = "residual"
 
 
 def _core(F, manifold: GeneralizedStiefel, P, X0, opts: BlockOptions):
@@ -90,8 +91,13 @@ def _core(F, manifold: GeneralizedStiefel, P, X0, opts: BlockOptions):
         """
         rg = manifold.egrad_to_rgrad(X, G)
         gn = manifold.norm(X, rg)
-        xi = rg if P is None else preconditioned_gradient(manifold.op, P, X, G)
         R = G - manifold.op.mv(X) @ sym(X.T @ G)
+        if P is None:
+            xi = rg
+        elif opts.precondition == "metric":
+            xi = preconditioned_gradient(manifold.op, P, X, G)
+        else:
+            xi = preconditioned_residual(manifold, P, X, R)
         return xi, gn, R
 
     F0, G0 = value_and_grad(X0)
@@ -210,6 +216,7 @@ def minimize(
     *,
     method: str = "cg",
     preconditioner=None,
+    precondition: str = "residual",
     gtol: float = 1e-6,
     xtol: float = 0.0,
     max_iters: int = 1000,
@@ -231,6 +238,9 @@ def minimize(
       method: ``"cg"`` (Riemannian CG + strong Wolfe) or ``"bb"`` (BB + nonmonotone Armijo).
       preconditioner: None, a callable ``Y ↦ PY`` (P SPD), or an SPD matrix/operator
         ``K`` whose inverse is applied (e.g. ``stiefel.shifted_inverse(W, M, σ)``).
+      precondition: ``"residual"`` (``proj_X(P R)``, k columns of P per iteration) or
+        ``"metric"`` (the exact gradient in the P⁻¹-metric, 2k columns); see
+        ``stiefel.preconditioning``.
       gtol: stop when the Riemannian gradient norm (manifold metric) is ≤ gtol.
       xtol: stop when an accepted step moves X by ≤ xtol (M-norm); 0 disables.
       max_iters: iteration limit.
@@ -252,6 +262,8 @@ def minimize(
         raise StiefelError("manifold must be a stiefel.GeneralizedStiefel")
     if max_iters < 1:
         raise StiefelError(f"max_iters must be ≥ 1, got {max_iters}")
+    if precondition not in PRECONDITIONING_MODES:
+        raise StiefelError(f"unknown precondition mode {precondition!r}; choose one of {PRECONDITIONING_MODES}")
     X0 = jnp.asarray(X0, dtype=manifold.dtype)
     if check:
         manifold.check_point(X0)
@@ -259,7 +271,7 @@ def minimize(
     c2 = 0.1 if c2 is None else c2
     opts = BlockOptions(method=method, gtol=float(gtol), xtol=float(xtol), max_iters=int(max_iters), c1=float(c1),
                         c2=float(c2), ls_max_evals=int(ls_max_evals), init_step=float(init_step),
-                        max_move=float(max_move), bb_gamma=float(bb_gamma))
+                        max_move=float(max_move), bb_gamma=float(bb_gamma), precondition=precondition)
     out, t_compile, t_run = run_compiled(_core, F, manifold, P, X0, opts)
     X, value, gnorm, it, status, history, stats = out
     result = Result(x=X, value=value, grad_norm=gnorm, iterations=it, status=status, history=history,

@@ -117,8 +117,16 @@ class _HostFactor:
         # Host callbacks see JAX's *global* x64 flag: under the thread-local
         # ``jax.enable_x64`` context the argument may arrive as float32. Return the
         # traced dtype regardless; for full float64 accuracy set the global flag.
-        out = self.lu.solve(np.ascontiguousarray(np.asarray(b), dtype=np.float64))
-        return out.astype(self.dtype, copy=False)
+        b = np.asarray(b, dtype=np.float64)
+        if b.ndim == 1:
+            return self.lu.solve(b).astype(self.dtype, copy=False)
+        # SuperLU's multi-right-hand-side solve is slower than one solve per column
+        # (fandisk, 20 columns: 104 ms vs 27 ms); solve column by column.
+        flat = b.reshape(b.shape[0], -1)
+        out = np.empty_like(flat, order="F")
+        for j in range(flat.shape[1]):
+            out[:, j] = self.lu.solve(np.ascontiguousarray(flat[:, j]))
+        return out.reshape(b.shape).astype(self.dtype, copy=False)
 
 
 class SparseOperator(LinearOperator):

@@ -13,6 +13,12 @@ gradient ``M⁻¹G − X sym(XᵀG)``.
 
 For the sequential constraint set ``{x : CᵀMx = 0 (C = [Φ x])}`` the multiplier
 is a vector: ``ξ = P(g − MCλ)`` with ``(CᵀMPMC) λ = CᵀMPg``.
+
+The cheaper *residual* form (the default in the solvers) preconditions the
+residual ``R = G − MX sym(XᵀG)`` (``= M·grad_e``, zero exactly at critical points)
+and projects: ``ξ = proj_X(P R)``. It needs P on k columns instead of 2k, and it
+is a descent direction too: ``tr(Gᵀξ) = tr(RᵀPR) > 0``, because ``XᵀR`` is skew
+so the projection's correction is orthogonal to R.
 """
 
 from __future__ import annotations
@@ -25,7 +31,16 @@ from jaxtyping import Array, Float
 from .manifold import sym
 from .operators import LinearOperator, as_operator
 
-__all__ = ["as_preconditioner", "shifted_inverse", "preconditioned_gradient", "constrained_preconditioned_gradient"]
+__all__ = [
+    "as_preconditioner",
+    "shifted_inverse",
+    "preconditioned_gradient",
+    "preconditioned_residual",
+    "constrained_preconditioned_gradient",
+    "PRECONDITIONING_MODES",
+]
+
+PRECONDITIONING_MODES = ("residual", "metric")
 
 
 def as_preconditioner(P) -> Callable | None:
@@ -90,3 +105,9 @@ def constrained_preconditioned_gradient(apply_P: Callable, MC: Float[Array, "n c
     S = S * mask2 + jnp.diag(1.0 - active)
     lam = jnp.linalg.solve(sym(S), active * (MC.T @ Pg))
     return Pg - PMC @ lam
+
+
+def preconditioned_residual(manifold, apply_P: Callable, X: Float[Array, "n k"],
+                            R: Float[Array, "n k"]) -> Float[Array, "n k"]:
+    """``proj_X(P R)`` for the residual ``R = G − MX sym(XᵀG)`` (module docstring): k columns of P."""
+    return manifold.proj(X, apply_P(R))

@@ -37,7 +37,7 @@ from ._compile import run_compiled
 from .errors import ShapeError, StiefelError
 from .linesearch import along_curve, strong_wolfe
 from .operators import LinearOperator, as_operator
-from .preconditioning import as_preconditioner, constrained_preconditioned_gradient
+from .preconditioning import PRECONDITIONING_MODES, as_preconditioner, constrained_preconditioned_gradient
 from .result import History, SequentialResult, Status
 
 __all__ = ["SequentialConstraint", "SequentialOptions", "minimize_sequential", "DIRECTIONS"]
@@ -104,6 +104,7 @@ class SequentialOptions:
     c2: float = 0.1
     ls_max_evals: int = 30
     max_step: float = float(np.pi / 2)
+    precondition: str = "residual"
 
 
 class _Carry(NamedTuple):
@@ -131,7 +132,7 @@ def _column_core(f, op: LinearOperator, P, Phi, active, x0, opts: SequentialOpti
     value_and_grad = jax.value_and_grad(f)
     dtype = x0.dtype
     max_step = jnp.asarray(opts.max_step, dtype)
-    if P is not None:
+    if P is not None and opts.precondition == "metric":
         MPhi = op.mv(Phi)
         PMPhi = P(MPhi)
         act = jnp.concatenate([active, jnp.ones((1,), dtype)])
@@ -140,13 +141,16 @@ def _column_core(f, op: LinearOperator, P, Phi, active, x0, opts: SequentialOpti
         rg = S.egrad_to_rgrad(x, g)
         rg = S.proj(x, rg)  # a second projection removes the rounding left by the first
         gn = jnp.sqrt(jnp.maximum(S.inner(x, rg, rg), 0.0))
+        r = op.mv(rg)
         if P is None:
-            return rg, gn, op.mv(rg)
+            return rg, gn, r
+        if opts.precondition == "residual":
+            return S.proj(x, P(r[:, None])[:, 0]), gn, r
         Mx = op.mv(x)
         MC = jnp.concatenate([MPhi, Mx[:, None]], axis=1)
         PMC = jnp.concatenate([PMPhi, P(Mx[:, None])], axis=1)
         xi = constrained_preconditioned_gradient(P, MC, PMC, act, g)
-        return S.proj(x, xi), gn, op.mv(rg)
+        return S.proj(x, xi), gn, r
 
     f0, g0 = value_and_grad(x0)
     xi0, gn0, r0 = gradients(x0, g0)
@@ -233,6 +237,7 @@ def minimize_sequential(
     retraction: str = "periodic",
     direction: str = "cg",
     preconditioner=None,
+    precondition: str = "residual",
     gtol: float = 1e-6,
     xtol: float = 0.0,
     max_iters: int = 1000,
@@ -261,6 +266,8 @@ def minimize_sequential(
       direction: ``"cg"`` (default), ``"momentum"`` (the thesis's restart
         acceleration) or ``"gd"`` (Algorithm 6 as printed).
       preconditioner: as in ``stiefel.minimize`` (e.g. ``shifted_inverse(W, M, σ)``).
+      precondition: ``"residual"`` (P on one column per iteration) or ``"metric"`` (the
+        exact gradient in the P⁻¹-metric with the constraints as multipliers).
       gtol: stop a column when ``‖grad‖_M ≤ gtol``; xtol: or when the step τ ≤ xtol (0: off).
       max_iters: iteration limit per column.
       c1, c2, ls_max_evals, max_step: line search parameters.
@@ -274,6 +281,8 @@ def minimize_sequential(
     """
     if direction not in DIRECTIONS:
         raise StiefelError(f"unknown direction {direction!r}; choose one of {DIRECTIONS}")
+    if precondition not in PRECONDITIONING_MODES:
+        raise StiefelError(f"unknown precondition mode {precondition!r}; choose one of {PRECONDITIONING_MODES}")
     if retraction != "periodic":
         raise StiefelError("minimize_sequential steps along the periodic retraction only (retraction='periodic')")
     op = as_operator(M, dtype=dtype)
@@ -292,7 +301,8 @@ def minimize_sequential(
         key = jax.random.PRNGKey(seed)
     P = as_preconditioner(preconditioner)
     opts = SequentialOptions(direction=direction, gtol=float(gtol), xtol=float(xtol), max_iters=int(max_iters),
-                             c1=float(c1), c2=float(c2), ls_max_evals=int(ls_max_evals), max_step=float(max_step))
+                             c1=float(c1), c2=float(c2), ls_max_evals=int(ls_max_evals), max_step=float(max_step),
+                             precondition=precondition)
 
     Phi = jnp.zeros((n, k), dtype=dt)
     active = jnp.zeros((k,), dtype=dt)

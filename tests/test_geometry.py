@@ -135,3 +135,33 @@ def test_checker_rejects_the_thesis_gradient_slip():
     X = S.random_point(jax.random.PRNGKey(0))
     with pytest.raises(AssertionError):
         check_gradient(objective(N, K), _ThesisSlip(S), X, jax.random.PRNGKey(1))
+
+
+@pytest.mark.parametrize("kind", M_KINDS)
+def test_preconditioned_residual_is_descent_and_vanishes_at_critical_points(kind):
+    """ξ = proj_X(P R), R = G − MX sym(XᵀG): tangent, tr(Gᵀξ) = tr(RᵀPR) > 0, ξ = 0 at a critical point."""
+    from stiefel import preconditioned_residual
+    from stiefel.manifold import sym
+
+    M = metric_matrix(kind, N)
+    S = GeneralizedStiefel(M, K)
+    X = S.random_point(jax.random.PRNGKey(13))
+    G = jax.grad(objective(N, K))(X)
+    R = G - S.op.mv(X) @ sym(X.T @ G)
+    rng = np.random.default_rng(14)
+    B = rng.standard_normal((N, N))
+    P = jnp.asarray(np.linalg.inv(B @ B.T + N * np.eye(N)))
+    xi = preconditioned_residual(S, lambda Y: P @ Y, X, R)
+    XtMxi = X.T @ S.op.mv(xi)
+    assert float(jnp.max(jnp.abs(XtMxi + XtMxi.T))) < 1e-11
+    np.testing.assert_allclose(jnp.sum(G * xi), jnp.sum(R * (P @ R)), rtol=1e-10)
+    assert float(jnp.sum(G * xi)) > 0
+    # critical point of tr(XᵀWX): generalised eigenvectors of (W, M)
+    Wd = B + B.T
+    Md = dense_of(M)
+    L = np.linalg.cholesky(Md)
+    _, Y = np.linalg.eigh(np.linalg.solve(L, np.linalg.solve(L, Wd).T).T)
+    Xc = jnp.asarray(np.linalg.solve(L.T, Y[:, :K]))
+    Gc = 2.0 * jnp.asarray(Wd) @ Xc
+    Rc = Gc - S.op.mv(Xc) @ sym(Xc.T @ Gc)
+    assert float(jnp.max(jnp.abs(preconditioned_residual(S, lambda Y: P @ Y, Xc, Rc)))) < 1e-10
