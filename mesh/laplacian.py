@@ -56,7 +56,10 @@ class Laplacian:
       n_negative_weights: number of edges whose weight ``𝒲(v_i, v_j) =
         −(cot α_ij + cot β_ij)/2`` is positive, i.e. ``cot α + cot β < 0``
         (``W_ij > 0``): the thesis's assumption under Ex. 2.5.22(i) fails there and
-        Prop. 2.5.21 no longer guarantees ``W ⪰ 0``. Use ``weights="robust"`` then.
+        the Geršgorin proof of Prop. 2.5.21 no longer applies. (The cotangent
+        ``W`` is still PSD — it is the P1 stiffness matrix, ``fᵀWf = Σ_t area_t
+        |∇f|²`` — but the sign pattern, hence the discrete maximum principle,
+        is lost.) Use ``weights="robust"`` (intrinsic Delaunay) for non-negative weights.
         (Entries below ``1e-12·max|W|`` count as round-off.)
     """
 
