@@ -131,8 +131,37 @@ def face_areas(vertices: Float[np.ndarray, "n 3"], faces: Int[np.ndarray, "m 3"]
 
 def edges_of(faces: Int[np.ndarray, "m 3"]) -> Int[np.ndarray, "e 2"]:
     """Unique undirected edges ``(i, j)``, ``i < j``, of a triangle list, shape ``(e, 2)``."""
-    half = _half_edges(faces)
-    return np.unique(np.sort(half, axis=1), axis=0)
+    und = np.sort(_half_edges(faces), axis=1)
+    n = int(faces.max()) + 1 if faces.size else 0
+    return _unique_edges(und, n)[0]
+
+
+def _unique_rows(R: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Unique rows of a 2-D array: ``(uniq, first, inverse, counts)`` as ``np.unique(axis=0)``.
+
+    A stable lexicographic sort and a neighbour comparison: several times faster
+    than ``np.unique(axis=0)``, which compares rows as opaque byte strings.
+    ``first`` is the first occurrence in input order.
+    """
+    if R.shape[0] == 0:
+        e = np.zeros(0, dtype=np.int64)
+        return R, e, e, e
+    order = np.lexsort(R.T[::-1])
+    Rs = R[order]
+    new = np.empty(R.shape[0], dtype=bool)
+    new[0] = True
+    new[1:] = np.any(Rs[1:] != Rs[:-1], axis=1)
+    inverse = np.empty(R.shape[0], dtype=np.int64)
+    inverse[order] = np.cumsum(new) - 1
+    counts = np.diff(np.flatnonzero(np.append(new, True)))
+    return Rs[new], order[new], inverse, counts
+
+
+def _unique_edges(und: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Unique rows of an ``(e, 2)`` array of sorted vertex pairs, and their counts (int64 keys)."""
+    key = und[:, 0].astype(np.int64) * n + und[:, 1]
+    ukey, counts = np.unique(key, return_counts=True)
+    return np.stack([ukey // n, ukey % n], axis=1), counts
 
 
 def _half_edges(faces: np.ndarray) -> np.ndarray:
@@ -270,8 +299,7 @@ def from_arrays(
     if merge_duplicates:
         Vf = np.where(finite[:, None], V, 0.0)
         key = np.concatenate([Vf, (~finite)[:, None] * np.arange(n_in)[:, None]], axis=1)
-        _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
-        inverse = inverse.reshape(-1)
+        _, first, inverse, _ = _unique_rows(key)
         rep = first[inverse]  # representative (first occurrence) of each vertex
         n_merged = int(np.sum(rep[used] != np.flatnonzero(used)))
         F = rep[F]
@@ -290,7 +318,7 @@ def from_arrays(
     # duplicate faces (same vertex set)
     n_dup = 0
     if F.shape[0]:
-        _, keep = np.unique(np.sort(F, axis=1), axis=0, return_index=True)
+        _, keep, _, _ = _unique_rows(np.sort(F, axis=1))
         keep = np.sort(keep)
         n_dup = F.shape[0] - keep.size
         F = F[keep]
@@ -325,7 +353,7 @@ def from_arrays(
 def _check_manifold(F: np.ndarray) -> None:
     """Raise ``NonManifoldError`` if some undirected edge has more than two faces."""
     und = np.sort(_half_edges(F), axis=1)
-    uniq, counts = np.unique(und, axis=0, return_counts=True)
+    uniq, counts = _unique_edges(und, int(F.max()) + 1)
     bad = counts > 2
     if np.any(bad):
         e = uniq[np.argmax(bad)]
@@ -340,7 +368,7 @@ def _check_manifold(F: np.ndarray) -> None:
 def _with_topology(V: np.ndarray, F: np.ndarray, report: CleaningReport, *, warn: bool) -> Mesh:
     n = V.shape[0]
     und = np.sort(_half_edges(F), axis=1)
-    uniq, counts = np.unique(und, axis=0, return_counts=True)
+    uniq, counts = _unique_edges(und, n)
     n_edges = uniq.shape[0]
     # connected components of the vertex graph
     adj = sp.coo_array((np.ones(n_edges), (uniq[:, 0], uniq[:, 1])), shape=(n, n))

@@ -23,7 +23,7 @@ import numpy as np
 import scipy.sparse as sp
 from jaxtyping import Float, Int
 
-from .io import Mesh, _half_edges, face_areas
+from .io import Mesh, edges_of, face_areas
 
 __all__ = [
     "Laplacian",
@@ -161,7 +161,7 @@ def cotangent_weights(m: Mesh) -> sp.csr_array:
 
 def _adjacency(m: Mesh) -> sp.csr_array:
     """``Adj(N)`` (Def. 2.5.10 with erratum 8): 1 where vertices share an edge, else 0."""
-    e = np.unique(np.sort(_half_edges(m.faces), axis=1), axis=0)
+    e = edges_of(m.faces)
     n = m.n_vertices
     return _assemble(
         np.concatenate([e[:, 0], e[:, 1]]), np.concatenate([e[:, 1], e[:, 0]]), np.ones(2 * e.shape[0]), n
