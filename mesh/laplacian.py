@@ -21,7 +21,7 @@ from typing import Literal
 
 import numpy as np
 import scipy.sparse as sp
-from jaxtyping import Float, Int
+from jaxtyping import Float
 
 from .io import Mesh, edges_of, face_areas
 

@@ -10,7 +10,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 
 import mesh
-from mesh_fixtures import CLOSED_SMALL, SMALL, quiet_load, shared_mesh, sphere, two_spheres
+from mesh_fixtures import quiet_load, shared_mesh, sphere, two_spheres
 
 CASES = [
     ("hand_868.obj", "lumped"),

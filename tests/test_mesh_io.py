@@ -9,7 +9,7 @@ import pytest
 import trimesh
 
 import mesh
-from mesh_fixtures import SMALL, grid, quiet_load, shared_mesh, shared_path, sphere, two_spheres
+from mesh_fixtures import grid, quiet_load, shared_mesh, shared_path, sphere, two_spheres
 
 
 @pytest.mark.parametrize(

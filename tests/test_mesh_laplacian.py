@@ -6,7 +6,6 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-import scipy.linalg as sla
 import scipy.sparse as sp
 
 import mesh
