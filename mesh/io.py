@@ -336,7 +336,7 @@ def from_arrays(
     F_out = np.ascontiguousarray(remap[F])
     n_unref = n_in - n_merged - ref.size
 
-    _check_manifold(F_out)
+    _check_manifold(F_out, ref)
     report = CleaningReport(
         input_vertices=n_in,
         input_faces=m_in,
@@ -350,8 +350,11 @@ def from_arrays(
     return _with_topology(V_out, F_out, report, warn=warn)
 
 
-def _check_manifold(F: np.ndarray) -> None:
-    """Raise ``NonManifoldError`` if some undirected edge has more than two faces."""
+def _check_manifold(F: np.ndarray, original: np.ndarray) -> None:
+    """Raise ``NonManifoldError`` if some undirected edge has more than two faces.
+
+    ``original[i]`` is the input index of cleaned vertex ``i`` (named in the message).
+    """
     und = np.sort(_half_edges(F), axis=1)
     uniq, counts = _unique_edges(und, int(F.max()) + 1)
     bad = counts > 2
@@ -359,7 +362,8 @@ def _check_manifold(F: np.ndarray) -> None:
         e = uniq[np.argmax(bad)]
         raise NonManifoldError(
             f"{int(bad.sum())} non-manifold edge(s) shared by more than two faces, e.g. edge "
-            f"({int(e[0])}, {int(e[1])}) with {int(counts[np.argmax(bad)])} faces (indices after cleaning); "
+            f"({int(original[e[0]])}, {int(original[e[1]])}) with {int(counts[np.argmax(bad)])} faces "
+            "(input vertex indices); "
             "this looks like a volume or self-overlapping mesh: extract its boundary surface, or "
             "repair it (e.g. libigl/pymeshlab non-manifold edge repair) before loading"
         )

@@ -61,6 +61,9 @@ class Laplacian:
         |∇f|²`` — but the sign pattern, hence the discrete maximum principle,
         is lost.) Use ``weights="robust"`` (intrinsic Delaunay) for non-negative weights.
         (Entries below ``1e-12·max|W|`` count as round-off.)
+      extra: diagnostics; ``"nonpositive_areas"``: number of vertices whose area is
+        ``≤ 0`` — possible only for ``area="voronoi"`` on meshes with obtuse
+        triangles (Def. 2.5.14); such an ``A`` is not positive definite (use "mixed").
     """
 
     W: sp.csr_array

@@ -100,3 +100,12 @@ def test_graph_laplacian_with_uniform_area():
     # A = I/n: eigenvalues are n × those of Deg − Adj
     ref = np.linalg.eigvalsh(lap.W.toarray())[:6] * lap.n
     np.testing.assert_allclose(evals[1:], ref[1:], rtol=1e-9)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["armadillo_25479.obj", "camelhead.off"])
+def test_eigenpairs_large(name):
+    lap = mesh.laplacian(shared_mesh(name), area="fem")
+    evals, evecs = mesh.eigenbasis(lap, 50)
+    _check_pairs(lap, evals, evecs)
+    assert abs(evals[0]) <= 1e-9 * evals[1]

@@ -129,7 +129,7 @@ def test_polygons_are_fan_triangulated():
 def test_non_manifold_fin_raises():
     V = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1]])
     F = [[0, 1, 2], [1, 0, 3], [0, 1, 4]]
-    with pytest.raises(mesh.NonManifoldError, match=r"1 non-manifold edge\(s\).*\(0, 1\) with 3 faces"):
+    with pytest.raises(mesh.NonManifoldError, match=r"1 non-manifold edge\(s\).*\(0, 1\) with 3 faces \(input vertex"):
         mesh.load((V, F))
 
 
@@ -160,3 +160,22 @@ def test_trimesh_source_and_merge_switch():
     assert unmerged.n_components == len(s.faces)
     with pytest.raises(TypeError):
         mesh.load(3.0)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "name, chi, loops",
+    [("bunny.off", 2, 0), ("fandisk.off", 2, 0), ("camelhead.off", 1, 1), ("armadillo_25479.obj", 2, 0)],
+)
+def test_shared_large_meshes_topology(name, chi, loops):
+    m = shared_mesh(name)
+    assert (m.euler_characteristic, m.n_boundary_loops, m.n_components) == (chi, loops, 1)
+    assert not m.report.changed
+
+
+def test_non_manifold_message_uses_input_indices():
+    # an unused vertex 0 shifts the cleaned indices by one; the message names input indices
+    V = np.array([[9.0, 9, 9], [0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1]])
+    F = [[1, 2, 3], [2, 1, 4], [1, 2, 5]]
+    with pytest.raises(mesh.NonManifoldError, match=r"\(1, 2\) with 3 faces"):
+        mesh.load((V, F))

@@ -62,3 +62,14 @@ def test_explicit_samples_and_rho():
     np.testing.assert_allclose(lf.U.toarray(), Ut / Ut.sum(axis=1, keepdims=True), rtol=1e-12, atol=1e-15)
     with pytest.raises(ValueError, match="outside every local function"):
         mesh.local_functions(m, samples=samples[:2], rho=0.5 * r)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["bunny.off", "fandisk.off"])
+def test_local_functions_full_rank_large(name):
+    m = shared_mesh(name)
+    lf = mesh.local_functions(m, n_samples=300, seed=0)
+    np.testing.assert_allclose(lf.U.sum(axis=1), 1.0, atol=1e-14)
+    s = np.linalg.svd(lf.U.toarray(), compute_uv=False)
+    assert s.min() > 1e-3 * s.max()
+    assert 7 <= np.median(lf.coverage) <= 15
