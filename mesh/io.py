@@ -191,7 +191,44 @@ def load(source: Any, *, merge_duplicates: bool = True, warn: bool = True) -> Me
       ``MeshError``, a ``ValueError``); ``FileNotFoundError`` for a missing path.
     """
     vertices, faces = _read(source)
-    return from_arrays(vertices, faces, merge_duplicates=merge_duplicates, warn=warn)
+    m = from_arrays(vertices, faces, merge_duplicates=merge_duplicates, warn=warn)
+    if isinstance(source, (str, os.PathLike)):
+        n_poly = _polygons_in_file(Path(source))
+        if n_poly:  # trimesh fan-triangulated them while reading
+            from dataclasses import replace
+
+            m = replace(m, report=replace(m.report, triangulated_polygons=n_poly))
+    return m
+
+
+def _polygons_in_file(path: Path) -> int:
+    """Number of faces with more than 3 corners in an OBJ or OFF file (0 for other formats).
+
+    trimesh triangulates polygons while reading; this recovers the count for the report.
+    """
+    suffix = path.suffix.lower()
+    try:
+        if suffix == ".obj":
+            n = 0
+            with open(path, "r", errors="replace") as fh:
+                for line in fh:
+                    if line.startswith("f ") and len(line.split()) > 4:
+                        n += 1
+            return n
+        if suffix == ".off":
+            tokens = [ln.split("#")[0].split() for ln in open(path, "r", errors="replace")]
+            tokens = [t for t in tokens if t]
+            head = tokens[0]
+            start = 1
+            if head[0].upper().endswith("OFF"):
+                head = head[1:] or tokens[1]
+                start = 1 if len(tokens[0]) > 1 else 2
+            nv, nf = int(head[0]), int(head[1])
+            rows = tokens[start + nv : start + nv + nf]
+            return sum(1 for r in rows if int(r[0]) > 3)
+    except (OSError, ValueError, IndexError):
+        return 0
+    return 0
 
 
 def _read(source: Any) -> tuple[np.ndarray, Any]:

@@ -179,3 +179,15 @@ def test_non_manifold_message_uses_input_indices():
     F = [[1, 2, 3], [2, 1, 4], [1, 2, 5]]
     with pytest.raises(mesh.NonManifoldError, match=r"\(1, 2\) with 3 faces"):
         mesh.load((V, F))
+
+
+def test_polygons_in_files_are_reported(tmp_path):
+    obj = tmp_path / "quads.obj"
+    obj.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 2 0 0\nv 2 1 0\nf 1 2 3 4\nf 2 5 6 3\n")
+    m = mesh.load(obj)
+    assert m.n_faces == 4 and m.report.triangulated_polygons == 2
+    off = tmp_path / "pent.off"
+    off.write_text("OFF\n5 1 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n0.5 1.5 0\n5 0 1 2 4 3\n")
+    m = mesh.load(off)
+    assert m.n_faces == 3 and m.report.triangulated_polygons == 1
+    np.testing.assert_allclose(m.total_area, 1.25)
