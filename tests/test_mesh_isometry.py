@@ -7,6 +7,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import mesh
 from mesh_fixtures import SMALL, grid, shared_mesh
@@ -82,3 +84,21 @@ def test_permute_rejects_non_permutations():
     m = shared_mesh("decimated-knight.off")
     with pytest.raises(ValueError, match="permutation"):
         mesh.permute(m, np.zeros(m.n_vertices, dtype=int))
+
+
+@settings(max_examples=10, deadline=None)
+@given(
+    nx=st.integers(3, 7),
+    ny=st.integers(3, 7),
+    seed=st.integers(0, 2**16),
+    area=st.sampled_from(["lumped", "mixed", "voronoi", "fem", "degree"]),
+)
+def test_isometry_under_random_relabelling(nx, ny, seed, area):
+    V, F = grid(nx, ny, jitter=0.4, seed=seed)
+    p = mesh.load((V, F))
+    perm = np.random.default_rng(seed).permutation(p.n_vertices)
+    lp = mesh.laplacian(p, area=area)
+    ln = mesh.laplacian(mesh.permute(p, perm), area=area)
+    assert mesh.is_isometric(lp, ln, perm)
+    dA, dW = mesh.isometry_defect(lp, ln, perm)
+    assert dA <= 1e-12 * abs(lp.A).max() and dW <= 1e-12 * abs(lp.W).max()
