@@ -99,7 +99,7 @@ def main(argv=None):
         print(f"n = {n}: eigsh {t_eigsh:.2f} s", flush=True)
         for kind, kw, precond in cases:
             # unpreconditioned runs are capped: plain gradient methods need ~10³–10⁴ iterations here
-            max_iters = 1000 if precond else (2000 if n <= 10_000 else 1000)
+            max_iters = 1000 if precond else (2000 if n <= 10_000 else 300)
             row = run_case(kind, W, M, ref, gtol=args.gtol, max_iters=max_iters, precond=precond, **kw)
             row["n"] = n
             rows.append(row)
