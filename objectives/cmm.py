@@ -10,7 +10,10 @@ diagnostics. Methods:
   (ε, δ ← large → target, warm-started);
 * ``"sequential"`` — thesis Algorithm 6 (``stiefel.minimize_sequential``), same
   preconditioner and continuation, column by column;
-* ``"admm"`` / ``"admm_sequential"`` — the ADMM baseline (``objectives.admm``).
+* ``"admm"`` / ``"admm_sequential"`` — the ADMM baseline (``objectives.admm``);
+* ``"fast"`` — Algorithm 8 (``objectives.fast.restricted_admm``) on the span of
+  local functions ``U`` (pass ``local_functions=``, e.g. ``mesh.local_functions(m, n_samples=d).U``),
+  started from the restricted eigenbasis (Algorithm 7).
 
 The Laplacian ``lap`` is anything with scipy-sparse attributes ``W`` (PSD
 stiffness) and ``A`` (diagonal lumped mass), e.g. ``mesh.laplacian(m)``, or a
@@ -35,7 +38,7 @@ from .energies import cmm_energy
 
 __all__ = ["CMMResult", "compressed_modes", "METHODS", "unpack_laplacian", "first_eigenpairs"]
 
-METHODS = ("block", "sequential", "admm", "admm_sequential")
+METHODS = ("block", "sequential", "admm", "admm_sequential", "fast")
 
 
 @dataclasses.dataclass
@@ -137,6 +140,7 @@ def compressed_modes(
     continuation_start: float = 1e-1,
     preconditioner_shift: float | None = None,
     admm_options: ADMMOptions | None = None,
+    local_functions=None,
     dtype=None,
 ) -> CMMResult:
     """Compressed manifold modes of a Laplacian ``(W, A)``.
@@ -155,6 +159,7 @@ def compressed_modes(
         the target ε/δ (1: no continuation).
       preconditioner_shift: σ in ``(W + σA)⁻¹`` (default: λ₁, the first non-zero eigenvalue).
       admm_options: ``ADMMOptions`` for the ADMM methods.
+      local_functions: ``(n, d)`` sparse U for ``method="fast"``.
     """
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose one of {METHODS}")
@@ -168,10 +173,14 @@ def compressed_modes(
                   seed=seed, start=start if isinstance(start, str) else "array", gtol=gtol,
                   max_iters=max_iters, continuation=continuation, continuation_start=continuation_start)
     t_setup = time.perf_counter()
-    need_eigs = (isinstance(start, str) and start == "eigen") or (method in ("block", "sequential")
-                                                                    and preconditioner_shift is None)
+    if method == "fast" and local_functions is None:
+        raise ValueError("method='fast' needs local_functions=U (n × d), e.g. mesh.local_functions(m, n_samples=d).U")
+    need_eigs = method != "fast" and ((isinstance(start, str) and start == "eigen")
+                                      or (method in ("block", "sequential") and preconditioner_shift is None))
     evals, evecs = first_eigenpairs(W, a, max(k, 2)) if need_eigs else (None, None)
-    if isinstance(start, str):
+    if method == "fast":
+        X0 = None
+    elif isinstance(start, str):
         if start == "eigen":
             X0 = evecs[:, :k]
         elif start == "random":
@@ -185,7 +194,17 @@ def compressed_modes(
     setup_time = time.perf_counter() - t_setup
     history: dict = {}
 
-    if method in ("admm", "admm_sequential"):
+    if method == "fast":
+        from .fast import restricted_admm, restricted_eigenbasis
+
+        opts = admm_options or ADMMOptions()
+        Xr = None
+        if isinstance(start, str) and start == "eigen":
+            Xr = restricted_eigenbasis(W, sp.diags_array(a), local_functions, k)[2]
+        res = restricted_admm(W, a, local_functions, k, mu, weighting=weighting, X0=Xr, seed=seed, options=opts)
+        Psi, iters, wall, compile_t, status = res.Psi, res.iterations, res.wall_time, 0.0, res.status
+        history = {"time": res.history["time"], "objective": res.history["objective"]}
+    elif method in ("admm", "admm_sequential"):
         opts = admm_options or ADMMOptions()
         run = admm if method == "admm" else admm_sequential
         res = run(W, a, k, mu, weighting=weighting, Psi0=X0, seed=seed, options=opts)

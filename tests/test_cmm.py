@@ -103,3 +103,50 @@ def test_bad_parameters(hand):
         compressed_modes(hand, 3, -1.0)
     with pytest.raises(ValueError, match="diagonal"):
         compressed_modes((hand.W, hand.A + sp.eye(hand.n, k=1) * 1e-6), 3, 1.0)
+
+
+@pytest.fixture(scope="module")
+def hand_local():
+    m = mesh.load(MESHES / "hand_868.obj")
+    return m, mesh.local_functions(m, n_samples=200, seed=0)
+
+
+def test_fast_lemmas_7_1_2_and_7_1_3(hand, hand_local):
+    """Lifted restricted eigenfunctions are A-orthonormal and their Dirichlet energies are the
+    restricted eigenvalues, to 1e-10; restricted eigenvalues bound the true ones from above."""
+    from objectives.fast import restricted_eigenbasis
+
+    _, lf = hand_local
+    k = 8
+    evals, lifted, _ = restricted_eigenbasis(hand.W, hand.A, lf.U, k)
+    np.testing.assert_allclose(lifted.T @ (hand.A @ lifted), np.eye(k), atol=1e-10)
+    np.testing.assert_allclose(np.sum(lifted * (hand.W @ lifted), axis=0), evals, rtol=1e-10, atol=1e-10)
+    true = mesh.eigenbasis(hand, k).evals
+    assert np.all(evals >= true - 1e-9)
+
+
+def test_fast_glmh_low_rank_term(hand, hand_local):
+    """Algorithm 7 with Q = W + c·BBᵀ restricted without an n × n matrix equals the dense restriction."""
+    from objectives.fast import restricted_eigenbasis
+
+    _, lf = hand_local
+    B = hand.A @ mesh.eigenbasis(hand, 3).evecs
+    ev_lr = restricted_eigenbasis(hand.W, hand.A, lf.U, 5, low_rank=(B, 7.0))[0]
+    U = lf.U.toarray()  # test-only dense reference (n = 868)
+    Q = hand.W.toarray() + 7.0 * B @ B.T
+    import scipy.linalg as sla
+
+    ref = sla.eigh(U.T @ Q @ U, U.T @ hand.A.toarray() @ U, subset_by_index=(0, 4))[0]
+    np.testing.assert_allclose(ev_lr, ref, rtol=1e-9, atol=1e-9)
+
+
+def test_fast_method_is_a_reasonable_approximation(hand, hand_local):
+    _, lf = hand_local
+    mu = 0.01 * hand.n
+    fast = compressed_modes(hand, 6, mu, method="fast", weighting="uniform", local_functions=lf.U,
+                            admm_options=ADMMOptions(rho=100.0, adapt_rho=False, max_iters=1500))
+    assert fast.orthogonality <= 1e-10
+    full = compressed_modes(hand, 6, mu, method="block", weighting="uniform")
+    assert full.objective <= fast.objective <= 1.25 * full.objective
+    with pytest.raises(ValueError, match="local_functions"):
+        compressed_modes(hand, 6, mu, method="fast")

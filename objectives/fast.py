@@ -1,0 +1,150 @@
+"""Fast approximation by restriction to local functions (thesis Chapter 7, Algorithms 7–8; MATH.md §6).
+
+With a row-normalised local-function matrix ``U`` (n × d, sparse; from
+``mesh.local_functions``) every function is sought as ``UX`` for ``X ∈ R^{d×k}``:
+
+* Algorithm 7 — ``restricted_eigenbasis``: the generalised eigenproblem of
+  ``(Q̄, M̄) = (UᵀQU, UᵀMU)`` (d × d), lifted ``Φ̄ = Uφ̄``. The lifts are exactly
+  M-orthonormal (Lemma 7.1.2) and their energies ``φ̄ᵀQ̄φ̄`` equal the restricted
+  eigenvalues (Lemma 7.1.3). ``Q`` may be sparse, or carry the GLMH low-rank term.
+* Algorithm 8 — ``restricted_admm``: ADMM on the restricted CMM problem (7.3.5) in
+  the exact A-weighted form (with the corrections of MATH.md erratum 4):
+  ``X, E ∈ R^{d×k}``, ``S, U^S ∈ R^{n×k}``, ``U^E ∈ R^{d×k}``.
+
+  X-step: maximise ``tr(XᵀB)``, ``B = Ā(E − U^E) + UᵀA(S − U^S)``, over ``XᵀĀX = I``:
+  ``X = Ā^{-1/2} polar(Ā^{-1/2} B)``.
+  E-step: ``(2W̄ + ρĀ) E = ρĀ(X + U^E)`` (d × d, factored once per ρ).
+  S-step: ``S = shrink(UX + U^S, μ w_i/(ρ a_i))``.
+  Duals: ``U^E += X − E``, ``U^S += UX − S``. The final X is re-orthonormalised exactly.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import scipy.linalg as sla
+import scipy.sparse as sp
+
+from .admm import ADMMOptions, ADMMResult, _true_objective, l1_weights_np
+
+__all__ = ["restricted_matrices", "restricted_eigenbasis", "restricted_admm"]
+
+
+def restricted_matrices(Q, M, U):
+    """``(UᵀQU, UᵀMU)`` as dense symmetric d × d arrays (d ≪ n)."""
+    U = sp.csr_array(U)
+    Qbar = (U.T @ (Q @ U))
+    Mbar = (U.T @ (M @ U))
+    Qbar = Qbar.toarray() if sp.issparse(Qbar) else np.asarray(Qbar)  # d × d: small by design
+    Mbar = Mbar.toarray() if sp.issparse(Mbar) else np.asarray(Mbar)
+    return 0.5 * (Qbar + Qbar.T), 0.5 * (Mbar + Mbar.T)
+
+
+def restricted_eigenbasis(Q, M, U, k: int, *, low_rank=None):
+    """Algorithm 7: the k smallest eigenpairs of ``(UᵀQU, UᵀMU)``, lifted by U.
+
+    Args:
+      Q: ``(n, n)`` sparse symmetric (e.g. W, or W + μ_V A V).
+      M: ``(n, n)`` sparse SPD (e.g. A).
+      U: ``(n, d)`` sparse local functions.
+      k: number of eigenpairs (≤ d).
+      low_rank: optional ``(B, c)`` adding ``c·BBᵀ`` to Q (``B = AΦ`` for the GLMH term
+        ``μ_⊥ AΦΦᵀA``); restricted as ``c (UᵀB)(UᵀB)ᵀ`` without an n × n matrix.
+    Returns:
+      ``(evals (k,), lifted (n, k), coeffs (d, k))`` with ``liftedᵀ M lifted = I``.
+    """
+    Qbar, Mbar = restricted_matrices(Q, M, U)
+    if low_rank is not None:
+        B, c = low_rank
+        UB = np.asarray(sp.csr_array(U).T @ B)
+        Qbar = Qbar + c * (UB @ UB.T)
+    d = Qbar.shape[0]
+    if not 1 <= k <= d:
+        raise ValueError(f"k must satisfy 1 ≤ k ≤ d = {d} (the number of local functions)")
+    evals, coeffs = sla.eigh(Qbar, Mbar, subset_by_index=(0, k - 1))
+    return evals, np.asarray(sp.csr_array(U) @ coeffs), coeffs
+
+
+def restricted_admm(W, area_diag, U, k: int, mu: float, *, weighting: str = "area", X0=None, seed: int = 0,
+                    options: ADMMOptions = ADMMOptions()) -> ADMMResult:
+    """Algorithm 8: ADMM for CMMs restricted to ``span(U)``; returns lifted modes ``Ψ = UX``."""
+    W = sp.csr_array(W, dtype=np.float64)
+    a = np.asarray(area_diag, dtype=np.float64)
+    U = sp.csr_array(U, dtype=np.float64)
+    n, d = U.shape
+    w = l1_weights_np(a, weighting)
+    A = sp.diags_array(a)
+    Wbar, Abar = restricted_matrices(W, A, U)
+    ev, V = np.linalg.eigh(Abar)
+    if ev.min() <= 0:
+        raise ValueError("UᵀAU is singular: the local functions are linearly dependent")
+    Abar_isqrt = (V / np.sqrt(ev)) @ V.T
+    UtA = (U.T @ A).tocsr()
+    if X0 is None:
+        X0 = np.random.default_rng(seed).standard_normal((d, k))
+    X = _ortho(np.asarray(X0, dtype=np.float64), Abar)
+    E = X.copy()
+    S = U @ X
+    UE = np.zeros_like(X)
+    US = np.zeros_like(S)
+    rho = float(options.rho if options.rho is not None else max(mu, 1.0))
+    factors: dict = {}
+    hist = {key: [] for key in ("objective", "primal", "dual", "rho", "time")}
+    status = "max_iters"
+    t0 = time.perf_counter()
+    it = 0
+    for it in range(1, options.max_iters + 1):
+        B = Abar @ (E - UE) + UtA @ (S - US)
+        X = Abar_isqrt @ _polar(Abar_isqrt @ B)
+        E_old, S_old = E, S
+        if rho not in factors:
+            factors[rho] = sla.cho_factor(2.0 * Wbar + rho * Abar)
+        E = sla.cho_solve(factors[rho], rho * (Abar @ (X + UE)))
+        UX = U @ X
+        V_ = UX + US
+        S = np.sign(V_) * np.maximum(np.abs(V_) - mu * (w / a)[:, None] / rho, 0.0)
+        UE += X - E
+        US += UX - S
+        primal = np.sqrt(np.sum((X - E) * (Abar @ (X - E))) + np.sum(a[:, None] * (UX - S) ** 2))
+        dS = S - S_old
+        dual = rho * np.sqrt(np.sum((E - E_old) * (Abar @ (E - E_old))) + np.sum(a[:, None] * dS**2))
+        hist["objective"].append(_true_objective(W, w, mu, UX))
+        hist["primal"].append(primal)
+        hist["dual"].append(dual)
+        hist["rho"].append(rho)
+        hist["time"].append(time.perf_counter() - t0)
+        tol = np.sqrt(n * k) * options.eps_abs + options.eps_rel * np.sqrt(k)
+        if primal <= tol and dual <= tol + options.eps_rel * rho * np.sqrt(np.sum(a[:, None] * US**2)):
+            status = "converged"
+            break
+        if hist["time"][-1] > options.time_limit:
+            status = "time_limit"
+            break
+        if options.adapt_rho and it % options.adapt_every == 0:
+            if primal > options.rho_ratio * dual:
+                rho *= options.rho_tau
+                UE /= options.rho_tau
+                US /= options.rho_tau
+            elif options.adapt_rho != "increase" and dual > options.rho_ratio * primal:
+                rho /= options.rho_tau
+                UE *= options.rho_tau
+                US *= options.rho_tau
+    X = _ortho(X, Abar)
+    Psi = U @ X
+    return ADMMResult(
+        Psi=Psi, objective=_true_objective(W, w, mu, Psi), iterations=it, status=status,
+        history={key: np.asarray(v) for key, v in hist.items()}, wall_time=time.perf_counter() - t0,
+        factor_time=0.0, n_factorizations=len(factors),
+    )
+
+
+def _ortho(X, Mbar):
+    G = X.T @ Mbar @ X
+    w, V = np.linalg.eigh(0.5 * (G + G.T))
+    return X @ (V / np.sqrt(w)) @ V.T
+
+
+def _polar(B):
+    Uu, _, Vt = np.linalg.svd(B, full_matrices=False)
+    return Uu @ Vt
