@@ -36,7 +36,7 @@ import stiefel
 from .admm import ADMMOptions, admm, admm_sequential, l1_weights_np
 from .energies import cmm_energy
 
-__all__ = ["CMMResult", "compressed_modes", "METHODS", "unpack_laplacian", "first_eigenpairs"]
+__all__ = ["CMMResult", "compressed_modes", "select_mu", "METHODS", "unpack_laplacian", "first_eigenpairs"]
 
 METHODS = ("block", "sequential", "admm", "admm_sequential", "fast")
 
@@ -258,3 +258,53 @@ def compressed_modes(
         l1=l1_part, sparsity=sparsity, orthogonality=orth, iterations=iters, wall_time=wall,
         compile_time=compile_t, status=status, method=method, params=params, history=history,
     )
+
+
+def select_mu(lap, k: int, target_sparsity: float, *, threshold: str = "1e-3", mu_lo: float | None = None,
+              mu_hi: float | None = None, tol: float = 0.02, max_evals: int = 12, **kwargs):
+    """Find μ whose modes have a target sparsity (thesis §3.6, future work) by bisection in log μ.
+
+    Sparsity is the fraction of entries below ``threshold × max|ψ|`` (``CMMResult.sparsity``); it
+    grows with μ. Each solve is warm-started from the modes of the nearest μ tried so far.
+
+    Args:
+      lap, k: as in ``compressed_modes``; target_sparsity: in (0, 1).
+      mu_lo, mu_hi: initial bracket (default ``1e-3·n`` and ``1·n``); widened by ×10 steps if needed.
+      tol: stop when ``|sparsity − target| ≤ tol``; max_evals: solve budget.
+      kwargs: passed to ``compressed_modes`` (method, weighting, smoothing, ...).
+    Returns:
+      ``(mu, CMMResult, trials)`` with ``trials`` a list of ``(mu, sparsity, objective)``.
+    """
+    if not 0.0 < target_sparsity < 1.0:
+        raise ValueError("target_sparsity must lie in (0, 1)")
+    W, a = unpack_laplacian(lap)
+    n = a.shape[0]
+    lo = mu_lo if mu_lo is not None else 1e-3 * n
+    hi = mu_hi if mu_hi is not None else 1.0 * n
+    trials: list = []
+    results: dict = {}
+
+    def solve(mu):
+        start = kwargs.pop("start", "eigen") if not results else results[min(results, key=lambda m: abs(np.log(m / mu)))].modes
+        res = compressed_modes((W, sp.diags_array(a)), k, mu, start=start, **kwargs)
+        results[mu] = res
+        trials.append((mu, res.sparsity[threshold], res.objective))
+        return res.sparsity[threshold]
+
+    s_lo, s_hi = solve(lo), solve(hi)
+    while s_lo > target_sparsity and len(trials) < max_evals:
+        lo /= 10.0
+        s_lo = solve(lo)
+    while s_hi < target_sparsity and len(trials) < max_evals:
+        hi *= 10.0
+        s_hi = solve(hi)
+    best = min(results, key=lambda m: abs(results[m].sparsity[threshold] - target_sparsity))
+    while len(trials) < max_evals and abs(results[best].sparsity[threshold] - target_sparsity) > tol:
+        mid = float(np.sqrt(lo * hi))
+        s_mid = solve(mid)
+        if s_mid < target_sparsity:
+            lo = mid
+        else:
+            hi = mid
+        best = min(results, key=lambda m: abs(results[m].sparsity[threshold] - target_sparsity))
+    return best, results[best], trials

@@ -150,3 +150,15 @@ def test_fast_method_is_a_reasonable_approximation(hand, hand_local):
     assert full.objective <= fast.objective <= 1.25 * full.objective
     with pytest.raises(ValueError, match="local_functions"):
         compressed_modes(hand, 6, mu, method="fast")
+
+
+@pytest.mark.slow
+def test_select_mu_brackets_a_target_sparsity(knight):
+    from objectives.cmm import select_mu
+
+    mu, res, trials = select_mu(knight, 3, 0.4, tol=0.08, max_evals=8, method="block", weighting="uniform",
+                                continuation=1, eps=1e-2, delta=1e-2, gtol=1e-5)
+    assert abs(res.sparsity["1e-3"] - 0.4) <= 0.08 or len(trials) == 8
+    sparsities = [s for _, s, _ in sorted(trials)]
+    assert sparsities[0] <= sparsities[-1]  # sparser with larger μ
+    assert res.params["mu"] == mu
