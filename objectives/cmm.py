@@ -136,7 +136,7 @@ def compressed_modes(
     start: str | np.ndarray = "eigen",
     gtol: float = 1e-6,
     max_iters: int = 5000,
-    continuation: int = 3,
+    continuation: int = 1,
     continuation_start: float = 1e-1,
     preconditioner_shift: float | None = None,
     admm_options: ADMMOptions | None = None,
@@ -156,7 +156,9 @@ def compressed_modes(
       start: ``"eigen"`` (first k eigenfunctions), ``"random"``, or an ``(n, k)`` array.
       gtol, max_iters: per continuation stage (manifold methods).
       continuation: number of smoothing stages, geometric from ``continuation_start`` to
-        the target ε/δ (1: no continuation).
+        the target ε/δ (1, the default: none — from the eigenbasis start, going straight
+        to the target smoothing reached the ADMM objective far sooner on fandisk; more
+        stages can find lower minima on long runs, MATH.md notes).
       preconditioner_shift: σ in ``(W + σA)⁻¹`` (default: λ₁, the first non-zero eigenvalue).
       admm_options: ``ADMMOptions`` for the ADMM methods.
       local_functions: ``(n, d)`` sparse U for ``method="fast"``.
@@ -206,6 +208,9 @@ def compressed_modes(
         history = {"time": res.history["time"], "objective": res.history["objective"]}
     elif method in ("admm", "admm_sequential"):
         opts = admm_options or ADMMOptions()
+        if opts.rho is None and evals is not None:
+            # ρ of the order of the spectrum of the modes sought: too small a ρ diverges
+            opts = dataclasses.replace(opts, rho=2.0 * float(evals[k - 1] if k > 1 else evals[1]))
         run = admm if method == "admm" else admm_sequential
         res = run(W, a, k, mu, weighting=weighting, Psi0=X0, seed=seed, options=opts)
         Psi, iters, wall, compile_t, status = res.Psi, res.iterations, res.wall_time, 0.0, res.status
@@ -218,7 +223,7 @@ def compressed_modes(
         ratio_e, ratio_d = eps / min(eps, delta), delta / min(eps, delta)
         X = jnp.asarray(X0)
         iters, wall, compile_t, status = 0, 0.0, 0.0, "converged"
-        times, values = [], []
+        times, values, true_values = [], [], []
         manifold = stiefel.GeneralizedStiefel(a, k, retraction="cholesky", dtype=dtype) if method == "block" else None
         if manifold is not None:
             X = manifold.project_to_manifold(X)
@@ -226,11 +231,12 @@ def compressed_modes(
             F = energy.with_params(eps=s * ratio_e, delta=s * ratio_d)
             if method == "block":
                 res = stiefel.minimize(F, manifold, X, method="cg", preconditioner=P, gtol=gtol,
-                                       max_iters=max_iters)
+                                       max_iters=max_iters, monitor=F.true_value)
                 X = res.x
                 iters += int(res.iterations)
                 st = res.status_name
                 h = res.trimmed_history()
+                true_values.extend(list(h["monitor"]))
             else:
                 res = stiefel.minimize_sequential(F, a, k, X0=np.asarray(X), preconditioner=P, gtol=gtol,
                                                   max_iters=max_iters, dtype=dtype)
@@ -247,6 +253,8 @@ def compressed_modes(
                 status = st
         Psi = np.asarray(X, dtype=np.float64)
         history = {"time": np.asarray(times), "smoothed_objective": np.asarray(values)}
+        if true_values:
+            history["objective"] = np.asarray(true_values)
         # exact A-orthonormality of the returned modes
         G = Psi.T @ (a[:, None] * Psi)
         wv, V = np.linalg.eigh(0.5 * (G + G.T))

@@ -76,7 +76,7 @@ class BlockOptions:
     precondition: str = "residual"
 
 
-def _core(F, manifold: GeneralizedStiefel, P, X0, opts: BlockOptions):
+def _core(F, manifold: GeneralizedStiefel, P, X0, monitor, opts: BlockOptions):
     method, gtol, xtol, max_iters = opts.method, opts.gtol, opts.xtol, opts.max_iters
     c1, c2, ls_max_evals, init_step = opts.c1, opts.c2, opts.ls_max_evals, opts.init_step
     max_move, bb_gamma = opts.max_move, opts.bb_gamma
@@ -103,7 +103,8 @@ def _core(F, manifold: GeneralizedStiefel, P, X0, opts: BlockOptions):
     F0, G0 = value_and_grad(X0)
     xi0, gn0, G0 = gradients(X0, G0)
     dtype = X0.dtype
-    hist = History.empty(max_iters + 1, dtype).record(0, F0, gn0, 0.0)
+    watch = (lambda X: jnp.nan) if monitor is None else monitor  # noqa: E731
+    hist = History.empty(max_iters + 1, dtype).record(0, F0, gn0, 0.0, watch(X0))
     finite0 = jnp.isfinite(F0) & jnp.all(jnp.isfinite(G0))
     status0 = jnp.where(~finite0, Status.NON_FINITE, jnp.where(gn0 <= gtol, Status.CONVERGED, -1))
     zero = jnp.zeros((), dtype)
@@ -199,7 +200,8 @@ def _core(F, manifold: GeneralizedStiefel, P, X0, opts: BlockOptions):
             gnorm=jnp.where(good, gn_new, c.gnorm), eta=eta_keep, X_prev=c.X,
             step=jnp.where(good, step_next, c.step), F_prev=c.F, C=jnp.where(good, C_next, c.C),
             Q=jnp.where(good, Q_next, c.Q), it=it, status=status,
-            history=c.history.record(it, F_rec, jnp.where(good, gn_new, c.gnorm), tau),
+            history=c.history.record(it, F_rec, jnp.where(good, gn_new, c.gnorm), tau,
+                                     watch(jnp.where(good, X_new, c.X))),
             n_fevals=c.n_fevals + n_ls + 1, n_restarts=c.n_restarts + (restart | retry).astype(jnp.int32),
         )
 
@@ -228,6 +230,7 @@ def minimize(
     bb_gamma: float = 0.85,
     check: bool = True,
     throw: bool = False,
+    monitor: Callable | None = None,
 ) -> Result:
     """Minimise ``F(X)`` over ``X ∈ S_M`` from ``X0`` (the whole block at once).
 
@@ -251,6 +254,8 @@ def minimize(
       bb_gamma: Zhang–Hager averaging parameter (``"bb"``).
       check: validate ``X0`` (shape, finiteness, on the manifold to 1e-8).
       throw: raise ``SolverError`` on ``line_search_failed`` / ``non_finite``.
+      monitor: optional JAX function ``X ↦ scalar`` recorded at every iterate in
+        ``history.monitor`` (e.g. the true non-smooth objective, for time-to-target curves).
 
     Returns:
       ``Result`` with ``x, value, grad_norm, iterations, status, history, stats,
@@ -272,7 +277,7 @@ def minimize(
     opts = BlockOptions(method=method, gtol=float(gtol), xtol=float(xtol), max_iters=int(max_iters), c1=float(c1),
                         c2=float(c2), ls_max_evals=int(ls_max_evals), init_step=float(init_step),
                         max_move=float(max_move), bb_gamma=float(bb_gamma), precondition=precondition)
-    out, t_compile, t_run = run_compiled(_core, F, manifold, P, X0, opts)
+    out, t_compile, t_run = run_compiled(_core, F, manifold, P, X0, monitor, opts)
     X, value, gnorm, it, status, history, stats = out
     result = Result(x=X, value=value, grad_norm=gnorm, iterations=it, status=status, history=history,
                     stats={k: np.asarray(v) for k, v in stats.items()}, wall_time=t_run, compile_time=t_compile)

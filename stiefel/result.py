@@ -31,23 +31,26 @@ class History(eqx.Module):
     """Per-iteration record; entry 0 is the start, entries past ``iterations`` are NaN.
 
     value: objective; grad_norm: Riemannian gradient norm (manifold metric);
-    step: accepted step length τ (entry 0 is 0).
+    step: accepted step length τ (entry 0 is 0); monitor: the value of the solver's
+    ``monitor`` function at each iterate (e.g. a true, non-smooth objective), NaN if none.
     """
 
     value: Float[Array, "... T"]
     grad_norm: Float[Array, "... T"]
     step: Float[Array, "... T"]
+    monitor: Float[Array, "... T"]
 
     @staticmethod
     def empty(length: int, dtype, lead: tuple = ()) -> "History":
         nan = jnp.full(lead + (length,), jnp.nan, dtype=dtype)
-        return History(nan, nan, nan)
+        return History(nan, nan, nan, nan)
 
-    def record(self, i, value, grad_norm, step) -> "History":
+    def record(self, i, value, grad_norm, step, monitor=jnp.nan) -> "History":
         return History(
             self.value.at[..., i].set(value),
             self.grad_norm.at[..., i].set(grad_norm),
             self.step.at[..., i].set(step),
+            self.monitor.at[..., i].set(monitor),
         )
 
 
@@ -84,7 +87,7 @@ class Result(eqx.Module):
     def trimmed_history(self) -> dict:
         """History as numpy arrays cut to ``iterations + 1`` entries."""
         t = int(self.iterations) + 1
-        return {f: np.asarray(getattr(self.history, f))[..., :t] for f in ("value", "grad_norm", "step")}
+        return {f: np.asarray(getattr(self.history, f))[..., :t] for f in ("value", "grad_norm", "step", "monitor")}
 
     def raise_for_status(self) -> "Result":
         """Raise ``SolverError`` unless the solver converged (or only ran out of iterations)."""

@@ -334,7 +334,7 @@ def minimize_sequential(
         if callback is not None:
             callback(j, {"x": np.asarray(x), "value": float(fx), "grad_norm": float(gn),
                          "iterations": int(it), "status": Status.name(st), "time": t_run})
-    history = History(*(jnp.stack([getattr(h, fld) for h in hist]) for fld in ("value", "grad_norm", "step")))
+    history = History(*(jnp.stack([getattr(h, fld) for h in hist]) for fld in ("value", "grad_norm", "step", "monitor")))
     values = jnp.stack(out["values"])
     result = SequentialResult(
         x=Phi, value=jnp.sum(values), values=values, grad_norm=jnp.stack(out["grad_norm"]),
