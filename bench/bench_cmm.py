@@ -1,0 +1,141 @@
+"""CMM benchmark (issue 4): the manifold solver against the ADMM baseline, side by side.
+
+For each mesh (cotangent W, lumped A, unit area), k = 10, μ = 0.01·n, uniform ℓ1 weighting,
+all methods started from the first k eigenfunctions:
+
+* ADMM (``objectives.admm``, exact A-weighted form, ρ = ``rho_factor``·λ_k fixed, SuperLU
+  E-step factorisation) for a time budget: its best true objective and the time at which
+  it first came within 1e-3 (relative) of that best;
+* the block manifold solver (``compressed_modes(method="block")``: Riemannian CG,
+  ``(W + λ₁A)⁻¹`` preconditioner, Huber smoothing δ = 1e-3, Cholesky retraction): the
+  time at which its true objective (recorded every iteration) first comes within 1e-3 of
+  ADMM's best, its final objective and orthogonality;
+* the thesis's sequential algorithm (optional, ``--sequential``) for reference.
+
+    python -m bench.bench_cmm                          # bunny, fandisk, camelhead, armadillo
+    python -m bench.bench_cmm --meshes fandisk.off --admm-time 60
+
+Times exclude JIT compilation (reported apart) and the shared setup (eigenbasis).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+from pathlib import Path
+
+import jax
+
+jax.config.update("jax_enable_x64", True)  # benchmark script (an application), not library code
+
+import numpy as np  # noqa: E402
+import scipy  # noqa: E402
+
+import mesh  # noqa: E402
+from objectives.admm import ADMMOptions  # noqa: E402
+from objectives.cmm import compressed_modes, first_eigenpairs  # noqa: E402
+
+MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
+REFERENCE = {  # issue 4: ADMM reference implementation (CHOLMOD), 2-core CPU
+    "fandisk.off": (953.12, 29.0), "camelhead.off": (1299.2, 4.0), "bunny.off": (689.06, 0.7),
+}
+
+
+def first_time_within(times, values, target, rel=1e-3):
+    ok = np.nonzero(np.asarray(values) <= target * (1 + rel))[0]
+    return float(np.asarray(times)[ok[0]]) if ok.size else None
+
+
+def run_mesh(name, args):
+    m = mesh.load(MESHES / name)
+    lap = mesh.laplacian(m, weights="cotangent", area="lumped")
+    n, k = lap.n, args.k
+    mu = args.mu_factor * n
+    t0 = time.perf_counter()
+    evals, _ = first_eigenpairs(lap.W, lap.A.diagonal(), k)
+    t_eig = time.perf_counter() - t0
+    row = {"mesh": name, "n": n, "k": k, "mu": mu, "eigenbasis_seconds": t_eig}
+
+    admm = compressed_modes(lap, k, mu, method="admm", weighting="uniform",
+                            admm_options=ADMMOptions(rho=args.rho_factor * float(evals[-1]), adapt_rho=False,
+                                                     max_iters=10**6, time_limit=args.admm_time))
+    h = admm.history
+    best = float(np.min(h["objective"]))
+    row["admm"] = {"best": best, "final": admm.objective, "iterations": admm.iterations, "status": admm.status,
+                   "time_first_within_1e-3_of_best": first_time_within(h["time"], h["objective"], best),
+                   "ms_per_iteration": 1e3 * admm.wall_time / max(admm.iterations, 1),
+                   "rho": args.rho_factor * float(evals[-1])}
+    print(json.dumps({"mesh": name, "admm": row["admm"]}), flush=True)
+
+    blk = compressed_modes(lap, k, mu, method="block", weighting="uniform", gtol=args.gtol, max_iters=args.max_iters)
+    hb = blk.history
+    target = min(best, REFERENCE.get(name, (np.inf,))[0])
+    row["block"] = {"final": blk.objective, "iterations": blk.iterations, "status": blk.status,
+                    "orthogonality": blk.orthogonality, "wall_time": blk.wall_time, "compile_time": blk.compile_time,
+                    "ms_per_iteration": 1e3 * blk.wall_time / max(blk.iterations, 1),
+                    "time_to_admm_best": first_time_within(hb["time"], hb["objective"], best),
+                    "time_to_reference_best": first_time_within(hb["time"], hb["objective"], target)
+                    if name in REFERENCE else None}
+    t_admm = row["admm"]["time_first_within_1e-3_of_best"]
+    t_blk = row["block"]["time_to_admm_best"]
+    row["speedup_vs_admm"] = (t_admm / t_blk) if (t_admm and t_blk) else None
+    if name in REFERENCE and row["block"]["time_to_reference_best"]:
+        row["speedup_vs_reference"] = REFERENCE[name][1] / row["block"]["time_to_reference_best"]
+    print(json.dumps({"mesh": name, "block": row["block"], "speedup_vs_admm": row["speedup_vs_admm"]}), flush=True)
+
+    if args.sequential:
+        seq = compressed_modes(lap, k, mu, method="sequential", weighting="uniform", gtol=args.gtol,
+                               max_iters=args.seq_iters)
+        row["sequential"] = {"final": seq.objective, "iterations": seq.iterations, "status": seq.status,
+                             "wall_time": seq.wall_time, "compile_time": seq.compile_time,
+                             "orthogonality": seq.orthogonality}
+        print(json.dumps({"mesh": name, "sequential": row["sequential"]}), flush=True)
+    return row
+
+
+def markdown(meta, rows):
+    out = [f"machine: {meta['machine']}; date {meta['date']}; jax {meta['jax']}, scipy {meta['scipy']}; "
+           f"k = {meta['k']}, μ = {meta['mu_factor']}·n, uniform weighting, eigenbasis start; "
+           f"ADMM ρ = {meta['rho_factor']}·λ_k, budget {meta['admm_time']} s; command `{meta['command']}`", "",
+           "| mesh | n | ADMM best | ADMM: first within 1e-3 (s) | ADMM ms/it | block final | block: reaches ADMM best (s) "
+           "| speed-up | block it. | block ms/it | compile (s) | orthogonality | sequential final (s) |",
+           "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        a, b = r["admm"], r["block"]
+        fmt = (lambda v, f="{:.2f}": "–" if v is None else f.format(v))  # noqa: E731
+        seq = r.get("sequential")
+        seq_s = f"{seq['final']:.2f} ({seq['wall_time']:.1f})" if seq else "–"
+        out.append(f"| {r['mesh']} | {r['n']} | {a['best']:.2f} | {fmt(a['time_first_within_1e-3_of_best'])} | "
+                   f"{a['ms_per_iteration']:.1f} | {b['final']:.2f} | {fmt(b['time_to_admm_best'])} | "
+                   f"{fmt(r['speedup_vs_admm'], '{:.1f}×')} | {b['iterations']} | {b['ms_per_iteration']:.1f} | "
+                   f"{b['compile_time']:.1f} | {b['orthogonality']:.1e} | {seq_s} |")
+    return "\n".join(out)
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--meshes", nargs="+", default=["bunny.off", "fandisk.off", "camelhead.off", "armadillo_25479.obj"])
+    p.add_argument("-k", type=int, default=10)
+    p.add_argument("--mu-factor", type=float, default=0.01)
+    p.add_argument("--rho-factor", type=float, default=3.0)
+    p.add_argument("--admm-time", type=float, default=60.0)
+    p.add_argument("--gtol", type=float, default=1e-6)
+    p.add_argument("--max-iters", type=int, default=1500)
+    p.add_argument("--sequential", action="store_true")
+    p.add_argument("--seq-iters", type=int, default=300)
+    p.add_argument("--out", default=str(Path(__file__).with_name("results_cmm.json")))
+    args = p.parse_args(argv)
+    rows = [run_mesh(name, args) for name in args.meshes]
+    meta = {"date": time.strftime("%Y-%m-%d"), "machine": f"{platform.machine()}, {os.cpu_count()} cores",
+            "jax": jax.__version__, "scipy": scipy.__version__, "numpy": np.__version__, "k": args.k,
+            "mu_factor": args.mu_factor, "rho_factor": args.rho_factor, "admm_time": args.admm_time,
+            "command": "python -m bench.bench_cmm " + " ".join(argv if argv is not None else __import__("sys").argv[1:])}
+    Path(args.out).write_text(json.dumps({"meta": meta, "rows": rows}, indent=1))
+    print(markdown(meta, rows))
+
+
+if __name__ == "__main__":
+    main()
