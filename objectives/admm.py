@@ -32,7 +32,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-__all__ = ["ADMMOptions", "ADMMResult", "admm", "admm_sequential", "l1_weights_np"]
+__all__ = ["ADMMOptions", "ADMMResult", "admm", "admm_sequential", "l1_weights_np", "rho_update"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -78,6 +78,17 @@ class ADMMResult:
     n_factorizations: int
 
 
+def rho_update(options: ADMMOptions, it: int, primal: float, dual: float) -> float:
+    """Residual balancing (Boyd et al. §3.4.1): the factor to multiply ρ by (scaled duals divide by it)."""
+    if not options.adapt_rho or it % options.adapt_every:
+        return 1.0
+    if primal > options.rho_ratio * dual:
+        return options.rho_tau
+    if options.adapt_rho != "increase" and dual > options.rho_ratio * primal:
+        return 1.0 / options.rho_tau
+    return 1.0
+
+
 def l1_weights_np(area_diag: np.ndarray, weighting: str) -> np.ndarray:
     """ℓ1 weights: ``A_ii`` (``"area"``) or ``1/n`` (``"uniform"``) (MATH.md §4)."""
     if weighting == "area":
@@ -91,11 +102,15 @@ def _true_objective(W, w, mu, Psi) -> float:
     return float(np.sum(Psi * (W @ Psi)) + mu * np.sum(w[:, None] * np.abs(Psi)))
 
 
-def _a_orthonormalize(Psi, a):
-    """``Ψ (ΨᵀAΨ)^{-1/2}`` (exact A-orthonormalisation, symmetric)."""
-    G = Psi.T @ (a[:, None] * Psi)
+def orthonormalize(Psi, M):
+    """``Ψ (ΨᵀMΨ)^{-1/2}`` (exact, symmetric M-orthonormalisation); ``M`` a diagonal (1-D) or a matrix."""
+    MPsi = M[:, None] * Psi if np.ndim(M) == 1 else M @ Psi
+    G = Psi.T @ MPsi
     vals, vecs = np.linalg.eigh(0.5 * (G + G.T))
     return Psi @ (vecs / np.sqrt(vals)) @ vecs.T
+
+
+_a_orthonormalize = orthonormalize
 
 
 class _EStep:
@@ -198,15 +213,11 @@ def admm(W, area_diag, k: int, mu: float, *, weighting: str = "area", Psi0=None,
         if hist["time"][-1] > options.time_limit:
             status = "time_limit"
             break
-        if options.adapt_rho and it % options.adapt_every == 0:
-            if primal > options.rho_ratio * dual:
-                rho *= options.rho_tau
-                UE /= options.rho_tau
-                US /= options.rho_tau
-            elif options.adapt_rho != "increase" and dual > options.rho_ratio * primal:
-                rho /= options.rho_tau
-                UE *= options.rho_tau
-                US *= options.rho_tau
+        factor = rho_update(options, it, primal, dual)
+        if factor != 1.0:
+            rho *= factor
+            UE /= factor
+            US /= factor
     wall = time.perf_counter() - t0
     Psi_out = _a_orthonormalize(Psi, a)
     return ADMMResult(
@@ -263,15 +274,11 @@ def admm_sequential(W, area_diag, k: int, mu: float, *, weighting: str = "area",
             if primal <= eps_pri and dual <= eps_dual:
                 col_status = "converged"
                 break
-            if options.adapt_rho and it % options.adapt_every == 0:
-                if primal > options.rho_ratio * dual:
-                    rho *= options.rho_tau
-                    ue /= options.rho_tau
-                    us /= options.rho_tau
-                elif options.adapt_rho != "increase" and dual > options.rho_ratio * primal:
-                    rho /= options.rho_tau
-                    ue *= options.rho_tau
-                    us *= options.rho_tau
+            factor = rho_update(options, it, primal, dual)
+            if factor != 1.0:
+                rho *= factor
+                ue /= factor
+                us /= factor
         total_it += it
         if col_status != "converged":
             status = col_status

@@ -33,7 +33,7 @@ import scipy.sparse.linalg as spla
 
 import stiefel
 
-from .admm import ADMMOptions, admm, admm_sequential, l1_weights_np
+from .admm import ADMMOptions, admm, admm_sequential, l1_weights_np, orthonormalize
 from .energies import cmm_energy
 
 __all__ = ["CMMResult", "compressed_modes", "select_mu", "METHODS", "unpack_laplacian", "first_eigenpairs"]
@@ -98,9 +98,7 @@ def first_eigenpairs(W, a, k):
     vals, vecs = spla.eigsh(sp.csc_array(W), k=k, M=sp.diags_array(a).tocsc(), sigma=-1e-8 * scale, which="LM")
     order = np.argsort(vals)
     vals, vecs = vals[order], vecs[:, order]
-    G = vecs.T @ (a[:, None] * vecs)
-    w, V = np.linalg.eigh(0.5 * (G + G.T))
-    return vals, vecs @ (V / np.sqrt(w)) @ V.T
+    return vals, orthonormalize(vecs, a)
 
 
 def _diagnostics(W, a, mu, weighting, Psi):
@@ -255,10 +253,7 @@ def compressed_modes(
         history = {"time": np.asarray(times), "smoothed_objective": np.asarray(values)}
         if true_values:
             history["objective"] = np.asarray(true_values)
-        # exact A-orthonormality of the returned modes
-        G = Psi.T @ (a[:, None] * Psi)
-        wv, V = np.linalg.eigh(0.5 * (G + G.T))
-        Psi = Psi @ (V / np.sqrt(wv)) @ V.T
+        Psi = orthonormalize(Psi, a)  # exact A-orthonormality of the returned modes
     Psi, lam, dirichlet_part, l1_part, sparsity, orth = _diagnostics(W, a, mu, weighting, Psi)
     params["setup_time"] = setup_time
     return CMMResult(

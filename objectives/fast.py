@@ -26,7 +26,7 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 
-from .admm import ADMMOptions, ADMMResult, _true_objective, l1_weights_np
+from .admm import ADMMOptions, ADMMResult, _polar, _true_objective, l1_weights_np, orthonormalize, rho_update
 
 __all__ = ["restricted_matrices", "restricted_eigenbasis", "restricted_admm"]
 
@@ -83,7 +83,7 @@ def restricted_admm(W, area_diag, U, k: int, mu: float, *, weighting: str = "are
     UtA = (U.T @ A).tocsr()
     if X0 is None:
         X0 = np.random.default_rng(seed).standard_normal((d, k))
-    X = _ortho(np.asarray(X0, dtype=np.float64), Abar)
+    X = orthonormalize(np.asarray(X0, dtype=np.float64), Abar)
     E = X.copy()
     S = U @ X
     UE = np.zeros_like(X)
@@ -121,16 +121,12 @@ def restricted_admm(W, area_diag, U, k: int, mu: float, *, weighting: str = "are
         if hist["time"][-1] > options.time_limit:
             status = "time_limit"
             break
-        if options.adapt_rho and it % options.adapt_every == 0:
-            if primal > options.rho_ratio * dual:
-                rho *= options.rho_tau
-                UE /= options.rho_tau
-                US /= options.rho_tau
-            elif options.adapt_rho != "increase" and dual > options.rho_ratio * primal:
-                rho /= options.rho_tau
-                UE *= options.rho_tau
-                US *= options.rho_tau
-    X = _ortho(X, Abar)
+        factor = rho_update(options, it, primal, dual)
+        if factor != 1.0:
+            rho *= factor
+            UE /= factor
+            US /= factor
+    X = orthonormalize(X, Abar)
     Psi = U @ X
     return ADMMResult(
         Psi=Psi, objective=_true_objective(W, w, mu, Psi), iterations=it, status=status,
@@ -138,13 +134,3 @@ def restricted_admm(W, area_diag, U, k: int, mu: float, *, weighting: str = "are
         factor_time=0.0, n_factorizations=len(factors),
     )
 
-
-def _ortho(X, Mbar):
-    G = X.T @ Mbar @ X
-    w, V = np.linalg.eigh(0.5 * (G + G.T))
-    return X @ (V / np.sqrt(w)) @ V.T
-
-
-def _polar(B):
-    Uu, _, Vt = np.linalg.svd(B, full_matrices=False)
-    return Uu @ Vt
