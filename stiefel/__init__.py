@@ -5,7 +5,8 @@ Public API (MATH.md §1–3):
 * ``GeneralizedStiefel(M, k, metric=..., retraction=...)`` — the manifold.
 * ``SequentialConstraint`` — ``{x : ΦᵀMx = 0, xᵀMx = 1}`` for column-by-column solves.
 * ``strong_wolfe``, ``along_curve``, ``LineSearchStatus`` — the line search.
-* ``minimize`` (block solver) and ``minimize_sequential`` (thesis Algorithm 6).
+* ``minimize`` (block solver) and ``minimize_sequential`` (thesis Algorithm 6);
+  ``solve_block``, the block solver as a pure jittable/vmappable function.
 * ``Result``, ``SequentialResult``, ``Status``, ``History`` — solver outcomes.
 * ``as_operator``, ``shifted_inverse`` — SPD operators and preconditioners.
 * Errors: ``StiefelError`` and its subclasses.
@@ -20,6 +21,7 @@ callbacks, which see only the global flag.)
 """
 
 from .block_solver import METHODS, BlockOptions, minimize
+from .block_solver import solve as solve_block
 from .errors import NotSPDError, OffManifoldError, ShapeError, SolverError, StiefelError
 from .linesearch import LineSearchResult, LineSearchStatus, along_curve, strong_wolfe
 from .manifold import GeneralizedStiefel, skew, sym

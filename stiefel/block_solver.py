@@ -31,7 +31,7 @@ from .manifold import GeneralizedStiefel, sym
 from .preconditioning import PRECONDITIONING_MODES, as_preconditioner, preconditioned_gradient, preconditioned_residual
 from .result import History, Result, Status
 
-__all__ = ["minimize", "BlockOptions", "METHODS"]
+__all__ = ["minimize", "solve", "BlockOptions", "METHODS"]
 
 METHODS = ("cg", "bb")
 
@@ -209,6 +209,18 @@ def _core(F, manifold: GeneralizedStiefel, P, X0, monitor, opts: BlockOptions):
     stats = {"n_fevals": c.n_fevals, "n_grads": c.it + 1, "n_restarts": c.n_restarts,
              "dist_to_manifold": manifold.dist_to_manifold(c.X)}
     return c.X, c.F, c.gnorm, c.it, c.status, c.history, stats
+
+
+def solve(F: Callable, manifold: GeneralizedStiefel, X0, options: BlockOptions = BlockOptions(), *,
+          preconditioner: Callable | None = None, monitor: Callable | None = None) -> Result:
+    """The block solver as a pure function: jittable and vmappable (e.g. over starts or over
+    parameters of ``F``), no validation, no timing (``wall_time = compile_time = 0``).
+
+    ``preconditioner`` must already be a callable ``Y ↦ PY`` (see ``as_preconditioner``).
+    ``minimize`` is the checked, timed front end of the same computation.
+    """
+    X, value, gnorm, it, status, history, stats = _core(F, manifold, preconditioner, X0, monitor, options)
+    return Result(x=X, value=value, grad_norm=gnorm, iterations=it, status=status, history=history, stats=stats)
 
 
 def minimize(
