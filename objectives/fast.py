@@ -26,7 +26,7 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 
-from .admm import ADMMOptions, ADMMResult, _polar, _true_objective, l1_weights_np, orthonormalize, rho_update
+from .admm import ADMMOptions, ADMMResult, _polar, _true_objective, l1_weights_np, orthonormalize, RhoRule
 
 __all__ = ["restricted_matrices", "restricted_eigenbasis", "restricted_admm"]
 
@@ -92,6 +92,7 @@ def restricted_admm(W, area_diag, U, k: int, mu: float, *, weighting: str = "are
     factors: dict = {}
     hist = {key: [] for key in ("objective", "primal", "dual", "rho", "time")}
     status = "max_iters"
+    rule = RhoRule(options)
     t0 = time.perf_counter()
     it = 0
     for it in range(1, options.max_iters + 1):
@@ -121,7 +122,7 @@ def restricted_admm(W, area_diag, U, k: int, mu: float, *, weighting: str = "are
         if hist["time"][-1] > options.time_limit:
             status = "time_limit"
             break
-        factor = rho_update(options, it, primal, dual)
+        factor = rule.update(it, primal, dual)
         if factor != 1.0:
             rho *= factor
             UE /= factor
