@@ -11,6 +11,8 @@ import warnings
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 import scipy.linalg as sla
 import scipy.sparse as sp
 
@@ -269,3 +271,43 @@ def test_principal_angles_nonorthonormal(knight):
     P = ev.a_orthonormalize(Phi[:, :5], fem.A)
     np.testing.assert_allclose(P.T @ (fem.A @ P), np.eye(5), atol=1e-12)
     assert ev.principal_angles(P[:, :3], P, fem.A).max() < 1e-7
+
+
+def test_woodbury_inverse_matches_dense(knight):
+    """(S + c BBᵀ)⁻¹ applied by Woodbury equals the dense inverse (S = W − σA, B = AΦ)."""
+    m, lap, lam, Phi = knight
+    S = sp.csc_matrix(lap.W + 1e-3 * lap.A)
+    B = np.asarray(lap.A @ Phi[:, :7])
+    op = bases._woodbury_inverse(S, B, 1e4)
+    x = np.random.default_rng(0).standard_normal((m.n_vertices, 2))
+    ref = np.linalg.solve(S.toarray() + 1e4 * B @ B.T, x)
+    np.testing.assert_allclose(op.matmat(x), ref, rtol=1e-7, atol=1e-9 * np.abs(ref).max())
+
+
+def test_lmh_permutes_with_the_mesh():
+    """Prop. 3.5.1: on a vertex-permuted copy (Def. 3.4.8) LMHs permute with the vertices."""
+    m = shared_mesh("hand_868.obj")
+    perm = np.random.default_rng(5).permutation(m.n_vertices)
+    mp = mesh.permute(m, perm)
+    out = []
+    for mm in (m, mp):
+        lap = mesh.laplacian(mm)
+        _, Phi = mesh.eigenbasis(lap, 10)
+        _, v, _ = bases.region_from_reconstruction(lap.A, Phi, mesh.vertex_positions(mm), quantile=0.8)
+        out.append(bases.lmh(lap.W, lap.A, 4, Phi, 1e3, v=v, mu_R=1e2))
+    np.testing.assert_allclose(out[1].evals, out[0].evals, rtol=1e-9)
+    np.testing.assert_allclose(out[1].Psi, out[0].Psi[perm], atol=1e-7)
+
+
+@settings(max_examples=25)
+@given(n=st.integers(8, 30), k=st.integers(1, 5), l=st.integers(1, 5), seed=st.integers(0, 10_000))
+def test_principal_angles_match_scipy(n, k, l, seed):
+    """A-weighted angles equal scipy's Euclidean subspace angles of √a·B (Lemma 4.6.3)."""
+    rng = np.random.default_rng(seed)
+    a = rng.uniform(0.1, 2.0, n)
+    B1 = ev.a_orthonormalize(rng.standard_normal((n, k)), a)
+    B2 = ev.a_orthonormalize(rng.standard_normal((n, l)), a)
+    ours = ev.principal_angles(B1, B2, sp.diags(a))
+    ref = np.sort(sla.subspace_angles(np.sqrt(a)[:, None] * B1, np.sqrt(a)[:, None] * B2))
+    np.testing.assert_allclose(ours, ref, atol=1e-10)
+    assert ev.grassmann_distance(B1, B2, a) == pytest.approx(np.sqrt(np.sum(ref ** 2)), abs=1e-10)
