@@ -58,20 +58,21 @@ def test_glmh_without_penalties_is_the_eigenbasis(knight):
     np.testing.assert_allclose(Psi.T @ (lap.A @ Psi), np.eye(12), atol=1e-10)
 
 
-def test_glmh_low_rank_path_matches_dense_reference(knight):
+@pytest.mark.parametrize("mu_V, mu_perp", [(50.0, 1e3), (1e6, 1e6)])  # the thesis uses μ_R = μ_⊥ = 1e6
+def test_glmh_low_rank_path_matches_dense_reference(knight, mu_V, mu_perp):
     m, lap, lam, Phi = knight
     X = mesh.vertex_positions(m)
     _, v, _ = bases.region_from_reconstruction(lap.A, Phi[:, :10], X, quantile=0.8)
     k = 6
-    res = bases.glmh(lap.W, lap.A, k, mu_V=50.0, V=v, mu_perp=1e3, Phi=Phi[:, :10])
-    w, U = _dense_reference(lap, k, 50.0, v, 1e3, Phi[:, :10])
+    res = bases.glmh(lap.W, lap.A, k, mu_V=mu_V, V=v, mu_perp=mu_perp, Phi=Phi[:, :10])
+    w, U = _dense_reference(lap, k, mu_V, v, mu_perp, Phi[:, :10])
     np.testing.assert_allclose(res.evals, w, rtol=1e-8)
     assert ev.principal_angles(res.Psi, U, lap.A).max() <= 1e-6
     assert np.all(np.diff(res.evals) >= 0)
     np.testing.assert_allclose(res.Psi.T @ (lap.A @ res.Psi), np.eye(k), atol=1e-10)
     # the energies are the eigenvalues (Thm. 3.3.7): λ_i = ψ_iᵀ Q ψ_i, Q applied without forming it
     B = lap.A @ Phi[:, :10]
-    QPsi = lap.W @ res.Psi + 50.0 * (lap.A @ (v[:, None] * res.Psi)) + 1e3 * B @ (B.T @ res.Psi)
+    QPsi = lap.W @ res.Psi + mu_V * (lap.A @ (v[:, None] * res.Psi)) + mu_perp * B @ (B.T @ res.Psi)
     np.testing.assert_allclose(np.sum(res.Psi * QPsi, axis=0), res.evals, rtol=1e-9)
 
 
