@@ -4,12 +4,21 @@
   (``f0 … f9``, ``get``, ``info``, ``NAMES``).
 * ``objectives.energies`` — Dirichlet energy, weighted ℓ1 terms, the smoothed
   compressed-manifold-mode energy ``CMMEnergy`` and compressed eigenvalues.
+* ``objectives.cmm`` — ``compressed_modes`` (manifold solvers, ADMM, fast approximation)
+  and ``select_mu``; ``objectives.admm`` (Algorithm 3) and ``objectives.fast``
+  (Algorithms 7–8).
+* ``objectives.bases`` — generalised manifold harmonics (GLMH), LMHs, Hamiltonian
+  eigenfunctions, concatenated bases.
+* ``objectives.evaluation`` — reconstruction, reconstruction errors, principal angles,
+  Grassmannian distance.
+* ``objectives.fmaps`` — functional maps, point-to-point extraction, ICP, Err_S/Err_T/Err_GD.
 
 This package joins ``stiefel`` (operators) and the mesh quantities (W, A), but
 imports nothing from ``mesh``: callers pass the matrices.
 """
 
-from . import smoothings
+from . import admm, bases, cmm, evaluation, fast, fmaps, smoothings
+from .cmm import CMMResult, compressed_modes, select_mu
 from .energies import (
     CMMEnergy,
     Weighting,
@@ -24,6 +33,15 @@ from .smoothings import NAMES as SMOOTHING_NAMES
 from .smoothings import Smoothing
 
 __all__ = [
+    "admm",
+    "bases",
+    "cmm",
+    "evaluation",
+    "fast",
+    "fmaps",
+    "CMMResult",
+    "compressed_modes",
+    "select_mu",
     "smoothings",
     "Smoothing",
     "SMOOTHING_NAMES",

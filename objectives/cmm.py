@@ -137,6 +137,7 @@ def compressed_modes(
     continuation: int = 1,
     continuation_start: float = 1e-1,
     preconditioner_shift: float | None = None,
+    preconditioner_l1: float = 0.0,
     admm_options: ADMMOptions | None = None,
     local_functions=None,
     dtype=None,
@@ -157,7 +158,11 @@ def compressed_modes(
         the target ε/δ (1, the default: none — from the eigenbasis start, going straight
         to the target smoothing reached the ADMM objective far sooner on fandisk; more
         stages can find lower minima on long runs, MATH.md notes).
-      preconditioner_shift: σ in ``(W + σA)⁻¹`` (default: λ₁, the first non-zero eigenvalue).
+      preconditioner_shift: σ in ``(W + σA + γ(μ/δ)·diag(w))⁻¹`` (default: λ₁, the first non-zero eigenvalue).
+      preconditioner_l1: γ, a share of the Huber curvature ``μw_i/δ`` added to the
+        preconditioner's diagonal (default 0). Measured (k = 10, μ = 0.01n, uniform, γ = 0.3):
+        iterations to ADMM's objective camelhead 747 → 420, armadillo 621 → 309, but fandisk
+        95 → 185; hence off by default.
       admm_options: ``ADMMOptions`` for the ADMM methods.
       local_functions: ``(n, d)`` sparse U for ``method="fast"``.
     """
@@ -215,7 +220,12 @@ def compressed_modes(
         history = {"time": res.history["time"], "objective": res.history["objective"]}
     else:
         sigma = preconditioner_shift if preconditioner_shift is not None else float(max(evals[1], 1e-12))
-        P = stiefel.shifted_inverse(W, a, sigma)
+        if preconditioner_l1 > 0:
+            w = l1_weights_np(a, weighting)
+            K = W + sp.diags_array(sigma * a + preconditioner_l1 * mu * w / min(eps, delta))
+            P = stiefel.as_operator(K)
+        else:
+            P = stiefel.shifted_inverse(W, a, sigma)
         energy = cmm_energy(W, a, mu, smoothing=smoothing, eps=eps, delta=delta, weighting=weighting)
         schedule = _continuation(min(eps, delta), continuation, continuation_start)
         ratio_e, ratio_d = eps / min(eps, delta), delta / min(eps, delta)
