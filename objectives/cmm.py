@@ -133,6 +133,7 @@ def compressed_modes(
     seed: int = 0,
     start: str | np.ndarray = "eigen",
     gtol: float = 1e-6,
+    ftol: float = 1e-7,
     max_iters: int = 5000,
     continuation: int = 1,
     continuation_start: float = 1e-1,
@@ -154,6 +155,9 @@ def compressed_modes(
       seed: random seed (random starts, ADMM start).
       start: ``"eigen"`` (first k eigenfunctions), ``"random"``, or an ``(n, k)`` array.
       gtol, max_iters: per continuation stage (manifold methods).
+      ftol: the block solver also stops when its objective decreased by less than
+        ``ftol`` (relative) over 20 iterations (the smoothed problem's gradient norm can
+        stall above gtol in the rounding regime).
       continuation: number of smoothing stages, geometric from ``continuation_start`` to
         the target ε/δ (1, the default: none — from the eigenbasis start, going straight
         to the target smoothing reached the ADMM objective far sooner on fandisk; more
@@ -175,7 +179,7 @@ def compressed_modes(
     if not (np.isfinite(mu) and mu >= 0):
         raise ValueError(f"mu must be a finite non-negative number, got {mu}")
     params = dict(k=k, mu=mu, method=method, smoothing=smoothing, eps=eps, delta=delta, weighting=weighting,
-                  seed=seed, start=start if isinstance(start, str) else "array", gtol=gtol,
+                  seed=seed, start=start if isinstance(start, str) else "array", gtol=gtol, ftol=ftol,
                   max_iters=max_iters, continuation=continuation, continuation_start=continuation_start)
     t_setup = time.perf_counter()
     if method == "fast" and local_functions is None:
@@ -238,7 +242,7 @@ def compressed_modes(
         for stage, s in enumerate(schedule):
             F = energy.with_params(eps=s * ratio_e, delta=s * ratio_d)
             if method == "block":
-                res = stiefel.minimize(F, manifold, X, method="cg", preconditioner=P, gtol=gtol,
+                res = stiefel.minimize(F, manifold, X, method="cg", preconditioner=P, gtol=gtol, ftol=ftol,
                                        max_iters=max_iters, monitor=F.true_value)
                 X = res.x
                 iters += int(res.iterations)

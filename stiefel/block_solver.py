@@ -74,6 +74,8 @@ class BlockOptions:
     max_move: float = 1.0
     bb_gamma: float = 0.85
     precondition: str = "residual"
+    ftol: float = 0.0
+    ftol_window: int = 20
 
 
 def _core(F, manifold: GeneralizedStiefel, P, X0, monitor, opts: BlockOptions):
@@ -163,6 +165,9 @@ def _core(F, manifold: GeneralizedStiefel, P, X0, monitor, opts: BlockOptions):
         it = c.it + 1
         move = tau * manifold.norm(c.X, eta_used)
         conv = (gn_new <= gtol) | ((xtol > 0) & ok & (move <= xtol))
+        if opts.ftol > 0:  # stalled: relative decrease over the last ftol_window iterations ≤ ftol
+            past = c.history.value[jnp.maximum(it - opts.ftol_window, 0)]
+            conv = conv | ((it >= opts.ftol_window) & ok & (past - F_new <= opts.ftol * jnp.abs(F_new)))
         # a failed search along a CG direction is retried along −ξ before giving up
         retry = ~ok & ~restart if method == "cg" else jnp.zeros((), bool)
         status = jnp.where(
@@ -233,6 +238,7 @@ def minimize(
     precondition: str = "residual",
     gtol: float = 1e-6,
     xtol: float = 0.0,
+    ftol: float = 0.0,
     max_iters: int = 1000,
     c1: float = 1e-4,
     c2: float | None = None,
@@ -258,6 +264,9 @@ def minimize(
         ``stiefel.preconditioning``.
       gtol: stop when the Riemannian gradient norm (manifold metric) is ≤ gtol.
       xtol: stop when an accepted step moves X by ≤ xtol (M-norm); 0 disables.
+      ftol: stop (as converged) when the objective decreased by ≤ ftol·|F| over the last
+        20 iterations; 0 disables. For non-smooth objectives under smoothing, where the
+        gradient norm stalls above gtol.
       max_iters: iteration limit.
       c1, c2: Armijo / curvature constants; ``c2`` defaults to 0.1 for ``"cg"`` (CG needs
         a tighter curvature condition than quasi-Newton methods: with 0.9 it stalled
@@ -288,7 +297,8 @@ def minimize(
     c2 = 0.1 if c2 is None else c2
     opts = BlockOptions(method=method, gtol=float(gtol), xtol=float(xtol), max_iters=int(max_iters), c1=float(c1),
                         c2=float(c2), ls_max_evals=int(ls_max_evals), init_step=float(init_step),
-                        max_move=float(max_move), bb_gamma=float(bb_gamma), precondition=precondition)
+                        max_move=float(max_move), bb_gamma=float(bb_gamma), precondition=precondition,
+                        ftol=float(ftol))
     out, t_compile, t_run = run_compiled(_core, F, manifold, P, X0, monitor, opts)
     X, value, gnorm, it, status, history, stats = out
     result = Result(x=X, value=value, grad_norm=gnorm, iterations=it, status=status, history=history,

@@ -115,3 +115,17 @@ def test_pure_solver_vmaps_over_starts(problem):
         cos = np.linalg.svd(np.asarray(batched.x[i]).T @ (M[:, None] * np.asarray(single.x)), compute_uv=False)
         assert cos.min() >= 1 - 1e-8
     assert np.all(np.asarray(batched.status) == Status.CONVERGED)
+
+
+def test_ftol_stops_a_stalled_solve(problem):
+    """With ftol, a solve whose gradient tolerance is unreachable stops as converged once the
+    objective stops decreasing, long before max_iters; without it, it runs to max_iters."""
+    W, M, F, target = problem
+    S = GeneralizedStiefel(M, K, retraction="cholesky")
+    X0 = S.random_point(jax.random.PRNGKey(6))
+    P = shifted_inverse(W, M, 0.05)
+    stalled = minimize(F, S, X0, gtol=1e-30, ftol=1e-12, max_iters=2000, preconditioner=P)
+    assert stalled.converged and int(stalled.iterations) < 500
+    assert abs(float(stalled.value) - target) <= 1e-10 * target
+    full = minimize(F, S, X0, gtol=1e-30, max_iters=300, preconditioner=P)
+    assert int(full.status) == Status.MAX_ITERS
