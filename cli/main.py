@@ -14,9 +14,11 @@ line per stage (none with ``--quiet``); ``--json`` prints exactly one JSON objec
 ``stiefel: error: …`` on stderr: exit code 2 for bad arguments, 1 for bad input
 (missing file, non-manifold mesh, …).
 
-Partial results: every method, ``sequential`` included, writes its modes when the
-solve has finished (the solvers return whole results; there is no per-column
-callback yet).
+Partial results: for ``--method sequential`` the finished columns are saved to
+``DIR/modes.partial.npz`` as they complete *if* ``objectives.cmm.compressed_modes``
+accepts a ``callback=`` (passed through to ``stiefel.minimize_sequential``); it
+does not yet, so today every method writes its modes when the solve has finished
+(``summary.json`` says which applied).
 
 This is an application: ``main`` switches JAX to float64 (``jax_enable_x64``);
 the library modules never touch JAX's global configuration.
@@ -34,7 +36,7 @@ from typing import Any, NoReturn, Sequence
 
 import numpy as np
 
-from .outputs import MuSpec, parse_mu, stderr_line, to_jsonable, versions, write_json, write_ply
+from .outputs import MuSpec, PartialColumns, parse_mu, stderr_line, to_jsonable, versions, write_json, write_ply
 
 __all__ = ["main", "build_parser", "CLIError"]
 
@@ -212,6 +214,9 @@ def _cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         say(f"local functions: d = {d}")
     say(f"solving: k = {args.k}, mu = {mu:.6g} ({args.mu.text}), method = {args.method}, "
         f"smoothing = {args.smoothing}, weighting = {args.weighting}")
+    partial = _partial_writer(args.method, compressed_modes, out, say)
+    if partial is not None:
+        extra["callback"] = partial
     t = time.perf_counter()
     res = compressed_modes(lap, args.k, mu, method=args.method, smoothing=args.smoothing,
                            weighting=args.weighting, seed=args.seed, gtol=args.gtol, max_iters=args.max_iters,
@@ -245,10 +250,25 @@ def _cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     summary = _summary_head(args, argv, mesh_info)
     summary.update(parameters=params, mu=mu, diagnostics=diag,
                    compressed_eigenvalues=res.compressed_eigenvalues, timings=timings, files=files,
-                   partial_results="modes are written when the solve finishes (all methods)")
+                   partial_results=_PARTIAL_NOTE if partial is None else "modes.partial.npz during the solve")
     _finish(args, out, summary)
+    if partial is not None:
+        partial.discard()
     say(f"wrote {out / 'summary.json'}")
     return 0
+
+
+_PARTIAL_NOTE = ("modes are written when the solve finishes (objectives.cmm.compressed_modes has no "
+                 "per-column callback to pass through)")
+
+
+def _partial_writer(method: str, solve, out: Path, say) -> PartialColumns | None:
+    """A ``PartialColumns`` saver for ``method="sequential"`` when ``solve`` accepts ``callback=``, else None."""
+    import inspect
+
+    if method != "sequential" or "callback" not in inspect.signature(solve).parameters:
+        return None
+    return PartialColumns(out / "modes.partial.npz", say)
 
 
 def _cmd_eigs(args: argparse.Namespace, argv: Sequence[str] | None) -> int:

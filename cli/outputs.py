@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["MuSpec", "parse_mu", "versions", "to_jsonable", "write_json", "write_ply"]
+__all__ = ["MuSpec", "PartialColumns", "parse_mu", "versions", "to_jsonable", "write_json", "write_ply"]
 
 _MU_RE = re.compile(r"^\s*([0-9]*\.?[0-9]+(?:[eE][+-]?[0-9]+)?)\s*(n?)\s*$")
 
@@ -122,3 +122,39 @@ def write_ply(path: Path, vertices: np.ndarray, faces: np.ndarray, fields: np.nd
 def stderr_line(msg: str) -> None:
     """Print one line to stderr (newlines collapsed)."""
     print(" ".join(str(msg).split()), file=sys.stderr)
+
+
+class PartialColumns:
+    """Callback ``(j, info)`` that saves finished columns to ``path`` as they arrive.
+
+    Made for ``stiefel.minimize_sequential``'s ``callback(j, {"x": (n,), "value", "status", …})``:
+    after column ``j`` the file holds ``modes (n, j+1)`` (solve order, not yet
+    sorted by compressed eigenvalue), ``values`` and ``status``. Written to a
+    temporary name and renamed, so a reader never sees half a file. ``say``, if
+    given, gets one progress line per column.
+    """
+
+    def __init__(self, path: Path, say=None) -> None:
+        self.path, self.say = Path(path), say
+        self.columns: list[np.ndarray] = []
+        self.values: list[float] = []
+        self.status: list[str] = []
+
+    def __call__(self, j: int, info: dict) -> None:
+        import os
+
+        if j < len(self.columns):  # a new continuation stage restarts the columns
+            del self.columns[j:], self.values[j:], self.status[j:]
+        self.columns.append(np.asarray(info["x"], dtype=np.float64))
+        self.values.append(float(info.get("value", np.nan)))
+        self.status.append(str(info.get("status", "")))
+        tmp = self.path.with_name(self.path.name + ".tmp.npz")
+        np.savez(tmp, modes=np.stack(self.columns, axis=1), values=np.array(self.values),
+                 status=np.array(self.status))
+        os.replace(tmp, self.path)
+        if self.say is not None:
+            self.say(f"column {j} done ({self.status[-1]}), saved {self.path}")
+
+    def discard(self) -> None:
+        """Remove the partial file (the complete result has been written)."""
+        self.path.unlink(missing_ok=True)
