@@ -28,6 +28,7 @@ def _rotation(azim: float, elev: float) -> np.ndarray:
 
 def _draw(ax, vertices: np.ndarray, faces: np.ndarray, values: np.ndarray, azim: float, elev: float,
           vmax: float, cmap: str) -> None:
+    from matplotlib import colormaps
     from matplotlib.collections import PolyCollection
     from matplotlib.colors import Normalize
 
@@ -38,7 +39,7 @@ def _draw(ax, vertices: np.ndarray, faces: np.ndarray, values: np.ndarray, azim:
     order = np.argsort(-depth)                        # far (large y) first
     xy = tri[order][:, :, [0, 2]]
     face_val = values[faces].mean(axis=1)[order]
-    colors = __import__("matplotlib").colormaps[cmap](Normalize(-vmax, vmax)(face_val))
+    colors = colormaps[cmap](Normalize(-vmax, vmax)(face_val))
     # simple Lambert shading from the viewer direction (−y)
     n_unit = normal[order] / np.maximum(np.linalg.norm(normal[order], axis=1, keepdims=True), 1e-300)
     shade = 0.55 + 0.45 * np.abs(n_unit[:, 1])
@@ -59,11 +60,9 @@ def contact_sheet(path: Path, vertices: np.ndarray, faces: np.ndarray, fields: n
 
     Colours: ``cmap`` with limits ``±max|field|`` (0 is white for ``RdBu_r``).
     """
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    from matplotlib.figure import Figure
+    # an explicit Agg canvas: no pyplot, no global backend switch, no display needed
     from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
     fields = np.asarray(fields, dtype=np.float64).reshape(vertices.shape[0], -1)
     k, nv = fields.shape[1], len(views)

@@ -212,3 +212,12 @@ def test_partial_columns(tmp_path: Path) -> None:
     assert isinstance(_partial_writer("sequential", with_callback, tmp_path, print), PartialColumns)
     assert _partial_writer("block", with_callback, tmp_path, print) is None
     assert _partial_writer("sequential", without_callback, tmp_path, print) is None
+
+
+def test_demo_mesh_is_deterministic_closed_surface() -> None:
+    V, F = demo_mesh()
+    V2, F2 = demo_mesh()
+    assert np.array_equal(V, V2) and np.array_equal(F, F2)
+    m = mesh.load((V, F))
+    assert 1000 <= m.n_vertices <= 3000
+    assert m.is_closed and m.n_components == 1 and m.euler_characteristic == 2
