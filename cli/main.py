@@ -74,6 +74,16 @@ def _positive_int(text: str) -> int:
     return v
 
 
+def _positive_float(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
+    if not (np.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
+    return v
+
+
 def _common(p: argparse.ArgumentParser, k_default: int) -> None:
     p.add_argument("mesh", nargs="?", default=None,
                    help="mesh file (OBJ/OFF/PLY/STL); default: the built-in demo mesh")
@@ -89,12 +99,14 @@ def _cmm_options(p: argparse.ArgumentParser) -> None:
                    help="sparsity weight μ: absolute (5.2) or relative to the vertex count (0.01n); default 0.01n")
     p.add_argument("--weighting", choices=("area", "uniform"), default="area", help="ℓ1 weights (default area)")
     p.add_argument("--max-iters", type=_positive_int, default=5000, help="solver iteration cap (default 5000)")
-    p.add_argument("--gtol", type=float, default=1e-6, help="gradient tolerance (default 1e-6)")
+    p.add_argument("--gtol", type=_positive_float, default=1e-6, help="gradient tolerance (default 1e-6)")
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``stiefel`` argument parser (subcommands ``modes``, ``eigs``, ``compare-smoothings``)."""
-    parser = _Parser(prog=PROG, description=__doc__.splitlines()[0])
+    parser = _Parser(prog=PROG, description="Compressed manifold modes and Laplacian eigenpairs on triangle meshes.",
+                     epilog="examples: stiefel modes -k 6 --out out/ | stiefel modes mesh.obj -k 10 --mu 0.05n "
+                            "--json --out out/ | stiefel eigs mesh.off -k 20 --out eigs/")
     sub = parser.add_subparsers(dest="command", required=True, metavar="{modes,eigs,compare-smoothings}",
                                 parser_class=_Parser)
     p = sub.add_parser("modes", help="compressed manifold modes: npz, PLY, PNG, summary.json")

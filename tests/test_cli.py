@@ -139,7 +139,7 @@ def test_compare_smoothings_subset(tmp_path: Path) -> None:
 @needs_hand
 def test_compare_all_smoothings(tmp_path: Path) -> None:
     out = tmp_path / "cmp"
-    assert main(["compare-smoothings", str(HAND), "-k", "3", "--quiet", "--out", str(out)]) == 0
+    assert main(["compare-smoothings", str(HAND), "-k", "3", "--quiet", *FAST, "--out", str(out)]) == 0
     rows = json.loads((out / "summary.json").read_text())["results"]
     assert [r["smoothing"] for r in rows] == [f"f{i}" for i in range(10)]
     best = min(r["objective"] for r in rows if "objective" in r)
