@@ -23,7 +23,7 @@ from cli.outputs import parse_mu
 #: the block solver's stopping at gtol = 1e-6 is not bit-reproducible run to run (the same
 #: command converged in 413 iterations once and hit 5000 the next); tests use a looser
 #: tolerance and a cap so that they stay fast whatever happens
-FAST = ["--gtol", "1e-5", "--max-iters", "1500"]
+FAST = ["--gtol", "1e-5", "--max-iters", "800"]
 REPO = Path(__file__).resolve().parents[1]
 MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
 HAND = MESHES / "hand_868.obj"
