@@ -141,6 +141,7 @@ def compressed_modes(
     preconditioner_l1: float = 0.0,
     admm_options: ADMMOptions | None = None,
     local_functions=None,
+    callback=None,
     dtype=None,
 ) -> CMMResult:
     """Compressed manifold modes of a Laplacian ``(W, A)``.
@@ -169,6 +170,9 @@ def compressed_modes(
         95 → 185; hence off by default.
       admm_options: ``ADMMOptions`` for the ADMM methods.
       local_functions: ``(n, d)`` sparse U for ``method="fast"``.
+      callback: for ``method="sequential"``, ``callback(j, info)`` after each finished column
+        (``stiefel.minimize_sequential``'s; every continuation stage restarts at column 0), so a
+        long run can save its columns as they complete.
     """
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose one of {METHODS}")
@@ -251,7 +255,7 @@ def compressed_modes(
                 true_values.extend(list(h["monitor"]))
             else:
                 res = stiefel.minimize_sequential(F, a, k, X0=np.asarray(X), preconditioner=P, gtol=gtol,
-                                                  max_iters=max_iters, dtype=dtype)
+                                                  max_iters=max_iters, dtype=dtype, callback=callback)
                 X = res.x
                 iters += int(np.sum(np.asarray(res.iterations)))
                 names = set(res.status_names)

@@ -162,3 +162,14 @@ def test_select_mu_brackets_a_target_sparsity(knight):
     sparsities = [s for _, s, _ in sorted(trials)]
     assert sparsities[0] <= sparsities[-1]  # sparser with larger μ
     assert res.params["mu"] == mu
+
+
+def test_sequential_callback_reports_each_column(knight):
+    seen = []
+    res = compressed_modes(knight, 3, 0.01 * knight.n, method="sequential", max_iters=200,
+                           callback=lambda j, info: seen.append((j, np.asarray(info["x"]).copy())))
+    assert [j for j, _ in seen] == [0, 1, 2]
+    a = knight.A.diagonal()
+    X = np.stack([x for _, x in seen], axis=1)
+    np.testing.assert_allclose(X.T @ (a[:, None] * X), np.eye(3), atol=1e-10)
+    assert res.orthogonality <= 1e-10
