@@ -163,7 +163,9 @@ def write_report(path, rows, fm, args, total, load):
          f"* OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS')}",
          f"* command: `python -m bench.bench_bases{' --quick' if args.quick else ''} --out {args.out}` "
          f"(float64; best of {args.repeats} runs per timing; total wall time {total:.0f} s)",
-         "* cotangent W, lumped A normalised to total area 1; ARPACK tol = 0 (machine precision)", "",
+         "* cotangent W, lumped A normalised to total area 1; ARPACK tol = 0 (machine precision)",
+         "* timings on a shared 2-core machine vary by up to ~2× between runs (other jobs); compare the "
+         "ratios within a row rather than absolute times", "",
          "## GLMH vs plain eigsh", "",
          f"GLMH: `Q = W + μ_R A diag(v) + μ_⊥ (AΦ₂₀)(AΦ₂₀)ᵀ`, μ_R = μ_⊥ = {MU_R:g}, `v` the LMH region "
          "penalty from reconstructing the vertex positions in Φ₂₀ (90 % quantile). "
@@ -194,7 +196,12 @@ def write_report(path, rows, fm, args, total, load):
               f"{fm['t_icp']:.2f} | {fm['t_icp'] / fm['icp_iters']:.3f} | {fm['acc_icp']:.4f} | "
               f"{fm['orth_C_icp']:.1e} |",
               "", "(Each ICP iteration timed here includes its initial p2p query: "
-              "`icp_refine(C, …, iters=1)` called until the p2p map stops changing.)"]
+              "`icp_refine(C, …, iters=1)` called until the p2p map stops changing.)",
+              "", "Without the commutativity term the 130 descriptors' coefficients have numerical rank 32 "
+              "< k = 50 on this mesh (`RankDeficientWarning`); the minimum-norm C is then far from the "
+              "identity, the p2p map is poor and, in a first run of this script, p2p + ICP had not finished "
+              "after more than 2 minutes (the k-d tree queries in 50 dimensions degrade towards brute force "
+              "when the mapped points are far from the targets)."]
     Path(path).write_text("\n".join(L) + "\n")
 
 
