@@ -93,11 +93,19 @@ def unpack_laplacian(lap):
 
 
 def first_eigenpairs(W, a, k):
-    """The k smallest generalised eigenpairs of ``(W, diag(a))``, A-orthonormal (shift-invert eigsh)."""
+    """The k smallest generalised eigenpairs of ``(W, diag(a))``, A-orthonormal (shift-invert eigsh).
+
+    Deterministic: a fixed Lanczos start vector and a sign convention (the largest-magnitude
+    entry of each column is positive), so repeated calls give the same start for the solvers.
+    """
     scale = float(abs(W).sum() / W.shape[0]) / float(np.mean(a))
-    vals, vecs = spla.eigsh(sp.csc_array(W), k=k, M=sp.diags_array(a).tocsc(), sigma=-1e-8 * scale, which="LM")
+    v0 = np.random.default_rng(0).standard_normal(W.shape[0])  # deterministic: same start, same result
+    vals, vecs = spla.eigsh(sp.csc_array(W), k=k, M=sp.diags_array(a).tocsc(), sigma=-1e-8 * scale, which="LM",
+                            v0=v0)
     order = np.argsort(vals)
     vals, vecs = vals[order], vecs[:, order]
+    peak = vecs[np.argmax(np.abs(vecs), axis=0), np.arange(vecs.shape[1])]
+    vecs = vecs * np.sign(peak)  # sign convention: each column's largest-magnitude entry is positive
     return vals, orthonormalize(vecs, a)
 
 

@@ -23,6 +23,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import hashlib
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -106,12 +108,35 @@ class DenseOperator(LinearOperator):
         return jnp.diagonal(self.matrix)
 
 
-class _HostFactor:
-    """Host-side sparse LU of a symmetric matrix, hashable by identity (a static field)."""
+def _fingerprint(csr: sp.csr_array) -> str:
+    """A content hash of a CSR matrix (shape, structure and values)."""
+    h = hashlib.blake2b(digest_size=16)
+    h.update(np.asarray(csr.shape, dtype=np.int64).tobytes())
+    for part in (csr.indptr, csr.indices, csr.data):
+        h.update(np.ascontiguousarray(part).tobytes())
+    return h.hexdigest()
 
-    def __init__(self, lu: spla.SuperLU, dtype: np.dtype):
+
+class _ByContent:
+    """Static-field base: equal (and equally hashed) when the matrices behind are equal, so JAX's
+    compile cache recognises a new operator built from the same matrix (no recompilation)."""
+
+    key: tuple
+
+    def __hash__(self):
+        return hash(self.key)
+
+    def __eq__(self, other):
+        return type(other) is type(self) and other.key == self.key
+
+
+class _HostFactor(_ByContent):
+    """Host-side sparse LU of a symmetric matrix (a static field, compared by the matrix's content)."""
+
+    def __init__(self, lu: spla.SuperLU, dtype: np.dtype, fingerprint: str = ""):
         self.lu = lu
         self.dtype = dtype
+        self.key = ("lu", fingerprint or str(id(self)), np.dtype(dtype).str)
 
     def __call__(self, b: np.ndarray) -> np.ndarray:
         # Host callbacks see JAX's *global* x64 flag: under the thread-local
@@ -159,7 +184,7 @@ class SparseOperator(LinearOperator):
         vals[rows, slot] = csr.data
         host = None
         if factor:
-            host = _HostFactor(_symmetric_lu(csr), dtype)
+            host = _HostFactor(_symmetric_lu(csr), dtype, _fingerprint(csr))
         return cls(
             cols=jnp.asarray(cols, dtype=jnp.int32),
             vals=jnp.asarray(vals, dtype=dtype),
@@ -203,11 +228,12 @@ class SparseOperator(LinearOperator):
         return jnp.sum(jnp.where(is_diag, self.vals, 0.0), axis=1)
 
 
-class _Frozen:
-    """Wraps a host object as a static, identity-hashed pytree field."""
+class _Frozen(_ByContent):
+    """Wraps a host CSR matrix as a static pytree field, compared by content."""
 
     def __init__(self, value):
         self.value = value
+        self.key = ("csr", _fingerprint(value))
 
 
 def _symmetric_lu(csr: sp.csr_array) -> spla.SuperLU:

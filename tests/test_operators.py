@@ -74,3 +74,13 @@ def test_non_spd_is_rejected_with_a_named_error(M, message):
 def test_non_square_is_rejected():
     with pytest.raises(ShapeError):
         as_operator(np.ones((3, 4)))
+
+
+def test_equal_matrices_give_equal_static_parts():
+    """Operators built from equal matrices compare equal in their static fields (JAX's compile cache
+    reuses the executable); different matrices do not."""
+    M = metric_matrix("sparse", 9)
+    a, b = as_operator(M), as_operator(M.copy())
+    assert a.factor == b.factor and hash(a.factor) == hash(b.factor) and a.csr == b.csr
+    c = as_operator(M * 2.0)
+    assert a.factor != c.factor and a.csr != c.csr
