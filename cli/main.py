@@ -123,11 +123,12 @@ def build_parser() -> argparse.ArgumentParser:
     _common(p, 10)
     p.set_defaults(run=_cmd_eigs)
 
-    p = sub.add_parser("compare-smoothings", help="f0…f9 from the same start: markdown table and CSV")
+    p = sub.add_parser("compare-smoothings", help="f0…f9 from the same start: markdown table, CSV and a figure")
     _common(p, 4)
     _cmm_options(p)
     p.add_argument("--method", choices=("block", "sequential"), default="block", help="solver (default block)")
     p.add_argument("--smoothings", default=",".join(SMOOTHINGS), help="comma-separated subset (default f0,…,f9)")
+    p.add_argument("--no-png", action="store_true", help="skip comparison.png (first mode of each smoothing)")
     p.set_defaults(run=_cmd_compare)
     return parser
 
@@ -329,6 +330,7 @@ def _cmd_compare(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     mu = args.mu.resolve(m.n_vertices)
     say(f"mesh {mesh_info['source']}: n = {m.n_vertices}; k = {args.k}, mu = {mu:.6g}, method = {args.method}")
     rows: list[dict] = []
+    first_modes: list[tuple[str, np.ndarray]] = []
     for name in names:
         row: dict[str, Any] = {"smoothing": name, "c1_at_zero": smoothings.info(name).c1_at_zero}
         t = time.perf_counter()
@@ -338,6 +340,7 @@ def _cmd_compare(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
             row.update(status=r.status, objective=r.objective, dirichlet=r.dirichlet, l1=r.l1,
                        **{"sparsity_1e-3": r.sparsity["1e-3"]}, orthogonality=r.orthogonality,
                        iterations=r.iterations, time_s=time.perf_counter() - t)
+            first_modes.append((name, r.modes[:, 0]))
         except Exception as e:  # a smoothing that breaks the solver (f0) is reported, not fatal
             row.update(status=f"failed: {type(e).__name__}: {' '.join(str(e).split())[:120]}",
                        time_s=time.perf_counter() - t)
@@ -346,12 +349,19 @@ def _cmd_compare(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
             f"{row['time_s']:.2f}s")
     out = _out_dir(args)
     _write_table(out, rows)
+    files = {"markdown": "comparison.md", "csv": "comparison.csv"}
+    if first_modes and not args.no_png:
+        from .render import contact_sheet
+
+        # the first mode of each smoothing, one row each (cf. thesis Fig. 6.10–6.11)
+        contact_sheet(out / "comparison.png", m.vertices, m.faces, np.stack([f for _, f in first_modes], axis=1),
+                      titles=[f"{n}: first mode" for n, _ in first_modes])
+        files["png"] = "comparison.png"
     summary = _summary_head(args, argv, mesh_info)
     summary.update(parameters={"k": args.k, "mu": _mu_record(args.mu, mu), "method": args.method,
                                "weighting": args.weighting, "start": "eigen", "gtol": args.gtol,
                                "max_iters": args.max_iters},
-                   mu=mu, results=rows, timings={"total": time.perf_counter() - t_all},
-                   files={"markdown": "comparison.md", "csv": "comparison.csv"})
+                   mu=mu, results=rows, timings={"total": time.perf_counter() - t_all}, files=files)
     _finish(args, out, summary)
     say(f"wrote {out / 'comparison.md'}, {out / 'comparison.csv'} and {out / 'summary.json'}")
     return 0

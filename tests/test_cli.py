@@ -133,6 +133,10 @@ def test_compare_smoothings_subset(tmp_path: Path) -> None:
     for r in rows:
         assert r["objective"] == pytest.approx(r["dirichlet"] + r["l1"])
         assert r["orthogonality"] < 1e-10
+    import matplotlib.image
+
+    img = matplotlib.image.imread(out / "comparison.png")
+    assert img.shape[0] > 100 and float(img[..., :3].std()) > 0.01  # two rows of modes, not blank
 
 
 @pytest.mark.slow
