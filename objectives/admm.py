@@ -109,6 +109,14 @@ class RhoRule:
             return 1.0 / opt.rho_tau
         return 1.0
 
+    def apply(self, it: int, primal: float, dual: float, rho: float, *duals: np.ndarray) -> float:
+        """Return the new ρ; the scaled duals are rescaled in place."""
+        factor = self.update(it, primal, dual)
+        if factor != 1.0:
+            for u in duals:
+                u /= factor
+        return rho * factor
+
 
 def l1_weights_np(area_diag: np.ndarray, weighting: str) -> np.ndarray:
     """ℓ1 weights: ``A_ii`` (``"area"``) or ``1/n`` (``"uniform"``) (MATH.md §4)."""
@@ -235,11 +243,7 @@ def admm(W, area_diag, k: int, mu: float, *, weighting: str = "area", Psi0=None,
         if hist["time"][-1] > options.time_limit:
             status = "time_limit"
             break
-        factor = rule.update(it, primal, dual)
-        if factor != 1.0:
-            rho *= factor
-            UE /= factor
-            US /= factor
+        rho = rule.apply(it, primal, dual, rho, UE, US)
     wall = time.perf_counter() - t0
     Psi_out = _a_orthonormalize(Psi, a)
     return ADMMResult(
@@ -297,11 +301,7 @@ def admm_sequential(W, area_diag, k: int, mu: float, *, weighting: str = "area",
             if primal <= eps_pri and dual <= eps_dual:
                 col_status = "converged"
                 break
-            factor = rule.update(it, primal, dual)
-            if factor != 1.0:
-                rho *= factor
-                ue /= factor
-                us /= factor
+            rho = rule.apply(it, primal, dual, rho, ue, us)
         total_it += it
         if col_status != "converged":
             status = col_status

@@ -122,11 +122,7 @@ def restricted_admm(W, area_diag, U, k: int, mu: float, *, weighting: str = "are
         if hist["time"][-1] > options.time_limit:
             status = "time_limit"
             break
-        factor = rule.update(it, primal, dual)
-        if factor != 1.0:
-            rho *= factor
-            UE /= factor
-            US /= factor
+        rho = rule.apply(it, primal, dual, rho, UE, US)
     X = orthonormalize(X, Abar)
     Psi = U @ X
     return ADMMResult(
