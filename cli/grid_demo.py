@@ -1,6 +1,6 @@
 """Demo of the manifold layer: the first k generalised eigenpairs of a grid Laplacian.
 
-Run ``python -m stiefel.demo [--grid 60] [-k 10]``. It minimises ``xᵀWx`` column by
+Run ``python -m cli.grid_demo [--grid 60] [-k 10]``. It minimises ``xᵀWx`` column by
 column on ``{ΦᵀMx = 0, xᵀMx = 1}`` (thesis Algorithm 6 with μ = 0, MATH.md §2) and
 compares with ``scipy.sparse.linalg.eigsh``; then runs the block solver on
 ``tr(XᵀWX)``. ``W`` is the graph Laplacian of an m×m grid, ``M`` a random
@@ -28,7 +28,7 @@ def grid_laplacian(m: int) -> sp.csr_array:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m stiefel.demo", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="python -m cli.grid_demo", description=__doc__.splitlines()[0])
     parser.add_argument("--grid", type=int, default=60, help="grid side m (n = m²), default 60")
     parser.add_argument("-k", type=int, default=10, help="number of eigenpairs, default 10")
     parser.add_argument("--gtol", type=float, default=1e-8)
@@ -37,7 +37,7 @@ def main(argv: list[str] | None = None) -> int:
 
     import stiefel
 
-    # An application may set JAX's global configuration (the library never does).
+    # An application (this demo) may set JAX's global configuration; the library never does.
     jax.config.update("jax_enable_x64", True)
     if True:
         W = grid_laplacian(args.grid)
