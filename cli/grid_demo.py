@@ -39,40 +39,39 @@ def main(argv: list[str] | None = None) -> int:
 
     # An application (this demo) may set JAX's global configuration; the library never does.
     jax.config.update("jax_enable_x64", True)
-    if True:
-        W = grid_laplacian(args.grid)
-        n = W.shape[0]
-        M = np.random.default_rng(args.seed).uniform(0.5, 2.0, n)
-        ref = sla.eigsh(sp.csc_array(W), k=args.k, M=sp.diags_array(M).tocsc(), sigma=-1e-6, which="LM")[0]
-        Wop = stiefel.as_operator(W, check=False, factor=False)
-        P = stiefel.shifted_inverse(W, M, sigma=0.5 * ref[1])
+    W = grid_laplacian(args.grid)
+    n = W.shape[0]
+    M = np.random.default_rng(args.seed).uniform(0.5, 2.0, n)
+    ref = sla.eigsh(sp.csc_array(W), k=args.k, M=sp.diags_array(M).tocsc(), sigma=-1e-6, which="LM")[0]
+    Wop = stiefel.as_operator(W, check=False, factor=False)
+    P = stiefel.shifted_inverse(W, M, sigma=0.5 * ref[1])
 
-        def f(x):
-            return jnp.dot(x, Wop.mv(x))
+    def f(x):
+        return jnp.dot(x, Wop.mv(x))
 
-        print(f"grid {args.grid}×{args.grid}: n = {n}, k = {args.k}, gtol = {args.gtol:g} (float64)")
-        res = stiefel.minimize_sequential(f, M, args.k, gtol=args.gtol, max_iters=2000, preconditioner=P,
-                                          seed=args.seed)
-        print("\nsequential solver (Algorithm 6, CG directions, preconditioner (W + σM)⁻¹):")
-        print(f"{'j':>3} {'λ_j (solver)':>22} {'λ_j (eigsh)':>22} {'err/λ_k':>9} {'iters':>6} status")
-        for j in range(args.k):
-            v, r = float(res.values[j]), float(ref[j])
-            err = abs(v - r) / abs(float(ref[-1]))
-            print(f"{j:>3} {v:>22.15e} {r:>22.15e} {err:>9.1e} {int(res.iterations[j]):>6} {res.status_names[j]}")
-        print(f"orthogonality max|XᵀMX − I| = {res.stats['dist_to_manifold']:.1e}; "
-              f"{res.wall_time:.2f} s (+{res.compile_time:.2f} s compile)")
+    print(f"grid {args.grid}×{args.grid}: n = {n}, k = {args.k}, gtol = {args.gtol:g} (float64)")
+    res = stiefel.minimize_sequential(f, M, args.k, gtol=args.gtol, max_iters=2000, preconditioner=P,
+                                      seed=args.seed)
+    print("\nsequential solver (Algorithm 6, CG directions, preconditioner (W + σM)⁻¹):")
+    print(f"{'j':>3} {'λ_j (solver)':>22} {'λ_j (eigsh)':>22} {'err/λ_k':>9} {'iters':>6} status")
+    for j in range(args.k):
+        v, r = float(res.values[j]), float(ref[j])
+        err = abs(v - r) / abs(float(ref[-1]))
+        print(f"{j:>3} {v:>22.15e} {r:>22.15e} {err:>9.1e} {int(res.iterations[j]):>6} {res.status_names[j]}")
+    print(f"orthogonality max|XᵀMX − I| = {res.stats['dist_to_manifold']:.1e}; "
+          f"{res.wall_time:.2f} s (+{res.compile_time:.2f} s compile)")
 
-        S = stiefel.GeneralizedStiefel(M, args.k, retraction="cholesky")
+    S = stiefel.GeneralizedStiefel(M, args.k, retraction="cholesky")
 
-        def F(X):
-            return jnp.sum(X * Wop.mv(X))
+    def F(X):
+        return jnp.sum(X * Wop.mv(X))
 
-        block = stiefel.minimize(F, S, S.random_point(jax.random.PRNGKey(args.seed)), method="cg",
-                                 gtol=args.gtol, max_iters=2000, preconditioner=P)
-        print(f"\nblock solver (Riemannian CG, Cholesky retraction): tr(XᵀWX) = {float(block.value):.15e}, "
-              f"Σλ = {ref.sum():.15e}, {int(block.iterations)} iterations, {block.status_name}, "
-              f"{block.wall_time:.2f} s (+{block.compile_time:.2f} s compile)")
-        ok = res.converged and block.converged and np.allclose(np.asarray(res.values), ref, rtol=1e-6, atol=1e-10)
+    block = stiefel.minimize(F, S, S.random_point(jax.random.PRNGKey(args.seed)), method="cg",
+                             gtol=args.gtol, max_iters=2000, preconditioner=P)
+    print(f"\nblock solver (Riemannian CG, Cholesky retraction): tr(XᵀWX) = {float(block.value):.15e}, "
+          f"Σλ = {ref.sum():.15e}, {int(block.iterations)} iterations, {block.status_name}, "
+          f"{block.wall_time:.2f} s (+{block.compile_time:.2f} s compile)")
+    ok = res.converged and block.converged and np.allclose(np.asarray(res.values), ref, rtol=1e-6, atol=1e-10)
     return 0 if ok else 1
 
 
