@@ -139,8 +139,6 @@ def orthonormalize(Psi, M):
     return Psi @ (vecs / np.sqrt(vals)) @ vecs.T
 
 
-_a_orthonormalize = orthonormalize
-
 
 class _EStep:
     """Cached factorisations of ``2W + ρD`` (D = A or I) per value of ρ."""
@@ -195,7 +193,7 @@ def admm(W, area_diag, k: int, mu: float, *, weighting: str = "area", Psi0=None,
     r_scale = 1.0 / n  # the thesis's A ≈ rI
     if Psi0 is None:
         Psi0 = np.random.default_rng(seed).standard_normal((n, k))
-    Psi = _a_orthonormalize(np.asarray(Psi0, dtype=np.float64), a)
+    Psi = orthonormalize(np.asarray(Psi0, dtype=np.float64), a)
     E, S = Psi.copy(), Psi.copy()
     UE, US = np.zeros_like(Psi), np.zeros_like(Psi)
     rho = float(options.rho if options.rho is not None else max(mu, 1.0))
@@ -223,7 +221,7 @@ def admm(W, area_diag, k: int, mu: float, *, weighting: str = "area", Psi0=None,
         # residuals in the penalty norm
         primal = np.sqrt(np.sum(d[:, None] * ((Psi - E) ** 2 + (Psi - S) ** 2)))
         dual = rho * np.sqrt(np.sum(d[:, None] * (E - E_old + S - S_old) ** 2))
-        Psi_feasible = Psi if exact else _a_orthonormalize(Psi, a)
+        Psi_feasible = Psi if exact else orthonormalize(Psi, a)
         obj = _true_objective(W, w, mu, Psi_feasible)
         hist["objective"].append(obj)
         hist["primal"].append(primal)
@@ -245,7 +243,7 @@ def admm(W, area_diag, k: int, mu: float, *, weighting: str = "area", Psi0=None,
             break
         rho = rule.apply(it, primal, dual, rho, UE, US)
     wall = time.perf_counter() - t0
-    Psi_out = _a_orthonormalize(Psi, a)
+    Psi_out = orthonormalize(Psi, a)
     return ADMMResult(
         Psi=Psi_out, objective=_true_objective(W, w, mu, Psi_out), iterations=it, status=status,
         history={key: np.asarray(v) for key, v in hist.items()}, wall_time=wall,
@@ -308,7 +306,7 @@ def admm_sequential(W, area_diag, k: int, mu: float, *, weighting: str = "area",
         Phi = np.concatenate([Phi, psi[:, None]], axis=1)
         hist["objective"].append(_true_objective(W, w, mu, Phi))
         hist["time"].append(time.perf_counter() - t0)
-    Psi_out = _a_orthonormalize(Phi, a)
+    Psi_out = orthonormalize(Phi, a)
     return ADMMResult(
         Psi=Psi_out, objective=_true_objective(W, w, mu, Psi_out), iterations=total_it, status=status,
         history={key: np.asarray(v) for key, v in hist.items()}, wall_time=time.perf_counter() - t0,

@@ -79,7 +79,7 @@ def unpack_laplacian(lap):
         W, A = lap.W, lap.A
     W = sp.csr_array(W, dtype=np.float64)
     if sp.issparse(A):
-        if (A - sp.diags_array(A.diagonal())).count_nonzero() if hasattr(A, "count_nonzero") else False:
+        if sp.csr_array(A - sp.diags_array(A.diagonal())).count_nonzero() > 0:
             raise ValueError("compressed_modes needs a diagonal (lumped) area matrix A; use a lumped mass")
         a = np.asarray(A.diagonal(), dtype=np.float64)
     else:
