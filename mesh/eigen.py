@@ -21,8 +21,9 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
-from scipy.sparse.csgraph import reverse_cuthill_mckee
 from jaxtyping import Float
+
+from stiefel.sparse_factor import SymmetricFactor
 
 from .laplacian import Laplacian
 
@@ -40,33 +41,6 @@ class Eigenbasis(NamedTuple):
 
     evals: Float[np.ndarray, " k"]
     evecs: Float[np.ndarray, "n k"]
-
-
-def _shifted_inverse(M: sp.csc_matrix) -> spla.LinearOperator:
-    """``x ↦ M⁻¹x`` for symmetric positive definite ``M`` (here ``W − σA``), factored once.
-
-    The matrix is first renumbered by reverse Cuthill–McKee, then SuperLU orders
-    it by minimum degree on ``Mᵀ+M`` with symmetric mode and diagonal pivots (an
-    LDLᵀ in effect). Both matter: partial pivoting destroys the fill-reducing
-    order (armadillo_25479: 19 s instead of 0.4 s), and the minimum-degree
-    ordering is pathologically slow on some input orders (icosphere, 41k
-    vertices: 74 s as given, 0.3 s after RCM).
-    """
-    n = M.shape[0]
-    p = reverse_cuthill_mckee(sp.csr_matrix(M), symmetric_mode=True)
-    lu = spla.splu(
-        sp.csc_matrix(M[p][:, p]),
-        permc_spec="MMD_AT_PLUS_A",
-        diag_pivot_thresh=0.0,
-        options={"SymmetricMode": True},
-    )
-
-    def solve(x: np.ndarray) -> np.ndarray:
-        y = np.empty_like(x)
-        y[p] = lu.solve(np.ascontiguousarray(x[p]))
-        return y
-
-    return spla.LinearOperator((n, n), matvec=solve, matmat=solve, dtype=np.float64)
 
 
 def _spectral_scale(lap: Laplacian) -> float:
@@ -103,7 +77,7 @@ def eigenbasis(
     A = sp.csc_matrix(lap.A, dtype=np.float64)
     if sigma is None:
         sigma = -1e-8 * _spectral_scale(lap)
-    op_inv = _shifted_inverse(sp.csc_matrix(W - sigma * A))
+    op_inv = SymmetricFactor(W - sigma * A, check=False).as_linear_operator()
     v0 = np.random.default_rng(seed).standard_normal(n)
     ncv = min(n, max(3 * k, 30))
     evals, evecs = spla.eigsh(

@@ -30,7 +30,8 @@ import time
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
+
+from stiefel.sparse_factor import SymmetricFactor
 
 __all__ = ["ADMMOptions", "ADMMResult", "admm", "admm_sequential", "l1_weights_np", "RhoRule"]
 
@@ -154,8 +155,7 @@ class _EStep:
         lu = self.cache.get(rho)
         if lu is None:
             t0 = time.perf_counter()
-            lu = spla.splu(self.W2 + rho * self.D, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                           options={"SymmetricMode": True})
+            lu = SymmetricFactor(self.W2 + rho * self.D, check=False)
             self.factor_time += time.perf_counter() - t0
             self.count += 1
             if len(self.cache) > 8:

@@ -26,7 +26,8 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
-from scipy.sparse.csgraph import reverse_cuthill_mckee
+
+from stiefel.sparse_factor import SymmetricFactor
 
 from .evaluation import per_vertex_error, reconstruct
 
@@ -65,21 +66,6 @@ def _as_csc(X, n: int | None = None, name: str = "matrix") -> sp.csc_matrix:
     return X
 
 
-def _sparse_solver(S: sp.csc_matrix):
-    """``x ↦ S⁻¹x`` (``x`` of shape ``(n,)`` or ``(n, m)``), one sparse LU after an RCM renumbering."""
-    p = reverse_cuthill_mckee(sp.csr_matrix(S), symmetric_mode=True)
-    lu = spla.splu(sp.csc_matrix(S[p][:, p]), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                   options={"SymmetricMode": True})
-
-    def solve(x):
-        x = np.asarray(x, dtype=np.float64)
-        y = np.empty_like(x)
-        y[p] = lu.solve(np.ascontiguousarray(x[p]))
-        return y
-
-    return solve
-
-
 def _woodbury_inverse(S: sp.csc_matrix, B: np.ndarray | None, c: float) -> spla.LinearOperator:
     """``(S + c BBᵀ)⁻¹`` as a ``LinearOperator`` via Woodbury: ``S⁻¹ − S⁻¹B (I/c + BᵀS⁻¹B)⁻¹ BᵀS⁻¹``.
 
@@ -87,7 +73,7 @@ def _woodbury_inverse(S: sp.csc_matrix, B: np.ndarray | None, c: float) -> spla.
     Cost per application: one sparse triangular solve pair plus ``O(nr)``.
     """
     n = S.shape[0]
-    solve = _sparse_solver(S)
+    solve = SymmetricFactor(S, check=False).solve
     if B is None or c == 0.0:
         return spla.LinearOperator((n, n), matvec=solve, matmat=solve, dtype=np.float64)
     SiB = solve(B)  # (n, r)

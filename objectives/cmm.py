@@ -32,6 +32,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 import stiefel
+from stiefel.sparse_factor import SymmetricFactor
 
 from .admm import ADMMOptions, admm, admm_sequential, l1_weights_np, orthonormalize
 from .energies import cmm_energy
@@ -100,8 +101,10 @@ def first_eigenpairs(W, a, k):
     """
     scale = float(abs(W).sum() / W.shape[0]) / float(np.mean(a))
     v0 = np.random.default_rng(0).standard_normal(W.shape[0])  # deterministic: same start, same result
-    vals, vecs = spla.eigsh(sp.csc_array(W), k=k, M=sp.diags_array(a).tocsc(), sigma=-1e-8 * scale, which="LM",
-                            v0=v0)
+    sigma = -1e-8 * scale
+    A = sp.diags_array(a).tocsc()
+    OPinv = SymmetricFactor(sp.csc_array(W) - sigma * A, check=False).as_linear_operator()
+    vals, vecs = spla.eigsh(sp.csc_array(W), k=k, M=A, sigma=sigma, which="LM", v0=v0, OPinv=OPinv)
     order = np.argsort(vals)
     vals, vecs = vals[order], vecs[:, order]
     peak = vecs[np.argmax(np.abs(vecs), axis=0), np.arange(vecs.shape[1])]

@@ -10,8 +10,8 @@ shape ``(n,)`` or ``(n, k)``. Three implementations:
   neighbour table ("ELL": ``(n, w)`` column indices and values, ``w`` the
   largest row length). ``mv`` is ``w`` fused gathers with no scatter, which on
   CPU beat BCOO and ``segment_sum`` (see ``bench/RESULTS.md``). ``solve``
-  uses one sparse LU factorisation computed on the host at construction
-  (SuperLU, symmetric mode) and called through ``jax.pure_callback`` inside
+  uses one sparse factorisation computed on the host at construction
+  (``stiefel.sparse_factor.SymmetricFactor``: RCM + SuperLU, symmetric mode) and called through ``jax.pure_callback`` inside
   ``lax.custom_linear_solve``, so it is jittable and differentiable. The
   matrix is never densified.
 
@@ -30,10 +30,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 from jaxtyping import Array, Float, Int
 
 from .errors import NotSPDError, ShapeError
+from .sparse_factor import SymmetricFactor
 
 __all__ = [
     "LinearOperator",
@@ -131,10 +131,10 @@ class _ByContent:
 
 
 class _HostFactor(_ByContent):
-    """Host-side sparse LU of a symmetric matrix (a static field, compared by the matrix's content)."""
+    """Host-side factorisation of a symmetric matrix (a static field, compared by the matrix's content)."""
 
-    def __init__(self, lu: spla.SuperLU, dtype: np.dtype, fingerprint: str = ""):
-        self.lu = lu
+    def __init__(self, factor: SymmetricFactor, dtype: np.dtype, fingerprint: str = ""):
+        self.factor = factor
         self.dtype = dtype
         self.key = ("lu", fingerprint or str(id(self)), np.dtype(dtype).str)
 
@@ -142,16 +142,7 @@ class _HostFactor(_ByContent):
         # Host callbacks see JAX's *global* x64 flag: under the thread-local
         # ``jax.enable_x64`` context the argument may arrive as float32. Return the
         # traced dtype regardless; for full float64 accuracy set the global flag.
-        b = np.asarray(b, dtype=np.float64)
-        if b.ndim == 1:
-            return self.lu.solve(b).astype(self.dtype, copy=False)
-        # SuperLU's multi-right-hand-side solve is slower than one solve per column
-        # (fandisk, 20 columns: 104 ms vs 27 ms); solve column by column.
-        flat = b.reshape(b.shape[0], -1)
-        out = np.empty_like(flat, order="F")
-        for j in range(flat.shape[1]):
-            out[:, j] = self.lu.solve(np.ascontiguousarray(flat[:, j]))
-        return out.reshape(b.shape).astype(self.dtype, copy=False)
+        return self.factor.solve(b).astype(self.dtype, copy=False)
 
 
 class SparseOperator(LinearOperator):
@@ -184,7 +175,7 @@ class SparseOperator(LinearOperator):
         vals[rows, slot] = csr.data
         host = None
         if factor:
-            host = _HostFactor(_symmetric_lu(csr), dtype, _fingerprint(csr))
+            host = _HostFactor(SymmetricFactor(csr), dtype, _fingerprint(csr))
         return cls(
             cols=jnp.asarray(cols, dtype=jnp.int32),
             vals=jnp.asarray(vals, dtype=dtype),
@@ -236,36 +227,6 @@ class _Frozen(_ByContent):
         self.key = ("csr", _fingerprint(value))
 
 
-def _symmetric_lu(csr: sp.csr_array) -> spla.SuperLU:
-    """LU with symmetric permutation and diagonal pivots only; raises NotSPDError if a pivot ≤ 0.
-
-    For a symmetric matrix, elimination with diagonal pivots in a symmetric
-    order is an LDLᵀ factorisation, and the matrix is positive definite exactly
-    when every pivot is positive (Sylvester).
-    """
-    csc = sp.csc_matrix(csr, dtype=np.float64)
-    try:
-        lu = spla.splu(
-            csc,
-            permc_spec="MMD_AT_PLUS_A",
-            diag_pivot_thresh=0.0,
-            options={"SymmetricMode": True},
-        )
-    except RuntimeError as exc:  # exactly singular
-        raise NotSPDError(f"M is singular: sparse factorisation failed ({exc}); M must be SPD") from exc
-    pivots = lu.U.diagonal()
-    symmetric_order = np.array_equal(lu.perm_r, lu.perm_c)
-    if not symmetric_order:
-        raise NotSPDError("M is not positive definite: the factorisation needed off-diagonal pivoting")
-    if not np.all(pivots > 0):
-        bad = int(np.sum(pivots <= 0))
-        raise NotSPDError(
-            f"M is not positive definite: {bad} non-positive pivot(s) in its LDLᵀ factorisation "
-            f"(smallest {pivots.min():.3e})"
-        )
-    return lu
-
-
 def _check_symmetric(asym: float, scale: float, what: str) -> None:
     if not np.isfinite(scale):
         raise NotSPDError(f"{what} has non-finite entries")
@@ -299,7 +260,7 @@ def as_operator(M, *, check: bool = True, factor: bool = True, dtype=None) -> Li
             if np.any(csr.diagonal() <= 0):
                 raise NotSPDError("M is not positive definite: it has a non-positive diagonal entry")
             if not factor:
-                _symmetric_lu(csr)
+                SymmetricFactor(csr)
         return SparseOperator.from_scipy(csr, factor=factor, dtype=dtype)
     arr = np.asarray(M, dtype=np.float64)
     if arr.ndim == 1:

@@ -84,3 +84,35 @@ def test_equal_matrices_give_equal_static_parts():
     assert a.factor == b.factor and hash(a.factor) == hash(b.factor) and a.csr == b.csr
     c = as_operator(M * 2.0)
     assert a.factor != c.factor and a.csr != c.csr
+
+
+@pytest.mark.parametrize("backend,reorder", [("qdldl", True), ("superlu", True), ("superlu", False)])
+def test_symmetric_factor_solves_against_dense(backend, reorder):
+    from stiefel.sparse_factor import SymmetricFactor
+
+    rng = np.random.default_rng(3)
+    n = 40
+    B = sp.random(n, n, density=0.1, random_state=4)
+    S = sp.csr_matrix(B @ B.T + sp.eye(n))
+    f = SymmetricFactor(S, reorder=reorder, backend=backend)
+    assert f.backend == backend
+    b1, b2 = rng.standard_normal(n), rng.standard_normal((n, 3))
+    dense = S.toarray()
+    np.testing.assert_allclose(f.solve(b1), np.linalg.solve(dense, b1), rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(f(b2), np.linalg.solve(dense, b2), rtol=1e-10, atol=1e-12)
+    op = f.as_linear_operator()
+    np.testing.assert_allclose(op.matmat(b2), np.linalg.solve(dense, b2), rtol=1e-10, atol=1e-12)
+    assert f.nnz >= S.nnz // 2
+
+
+@pytest.mark.parametrize("backend", ["qdldl", "superlu"])
+def test_symmetric_factor_rejects_indefinite_only_when_checking(backend):
+    from stiefel.sparse_factor import SymmetricFactor
+
+    S = sp.csr_matrix(np.array([[2.0, 1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 0.0, 3.0]]))
+    with pytest.raises(NotSPDError, match="non-positive pivot"):
+        SymmetricFactor(S, backend=backend)
+    x = SymmetricFactor(S, check=False, backend=backend).solve(np.ones(3))
+    np.testing.assert_allclose(S @ x, np.ones(3), atol=1e-14)
+    with pytest.raises(NotSPDError, match="singular"):
+        SymmetricFactor(sp.csr_matrix(np.array([[1.0, 1.0], [1.0, 1.0]])), backend=backend)
