@@ -116,3 +116,33 @@ def test_symmetric_factor_rejects_indefinite_only_when_checking(backend):
     np.testing.assert_allclose(S @ x, np.ones(3), atol=1e-14)
     with pytest.raises(NotSPDError, match="singular"):
         SymmetricFactor(sp.csr_matrix(np.array([[1.0, 1.0], [1.0, 1.0]])), backend=backend)
+
+
+@pytest.mark.parametrize("k", [None, 3, 40])
+def test_quadratic_form_value_and_derivatives(k):
+    """tr(XᵀWX) and its custom JVP: gradient 2WX, Hessian 2W, derivative in W's values."""
+    from stiefel.operators import quadratic_form
+
+    n = 50
+    B = sp.random(n, n, density=0.1, random_state=0)
+    W = sp.csr_array(B + B.T + sp.eye(n))
+    op = SparseOperator.from_scipy(W)
+    rng = np.random.default_rng(1)
+    X = jnp.asarray(rng.standard_normal((n,) if k is None else (n, k)))
+    Xn = np.asarray(X)
+    np.testing.assert_allclose(quadratic_form(op, X), np.sum(Xn * (W @ Xn)), rtol=1e-12)
+    g = jax.jit(jax.grad(lambda X: quadratic_form(op, X)))(X)
+    np.testing.assert_allclose(g, 2 * (W @ Xn), rtol=1e-12, atol=1e-12)
+    V = jnp.asarray(rng.standard_normal(X.shape))
+    hv = jax.jvp(jax.grad(lambda X: quadratic_form(op, X)), (X,), (V,))[1]
+    np.testing.assert_allclose(hv, 2 * (W @ np.asarray(V)), rtol=1e-12, atol=1e-12)
+
+    def rebuilt(vals):
+        return SparseOperator(cols=op.cols, vals=vals, factor=None, csr=op.csr)
+
+    g_vals = jax.grad(lambda v: quadratic_form(rebuilt(v), X))(op.vals)
+    ref = jax.grad(lambda v: jnp.sum(X * rebuilt(v).mv(X)))(op.vals)
+    assert float(jnp.max(jnp.abs(ref))) > 0
+    np.testing.assert_allclose(g_vals, ref, rtol=1e-12, atol=1e-12)
+    batched = jax.vmap(lambda Y: quadratic_form(op, Y))(jnp.stack([X, 2 * X]))
+    np.testing.assert_allclose(batched, [np.sum(Xn * (W @ Xn)), 4 * np.sum(Xn * (W @ Xn))], rtol=1e-12)
