@@ -34,12 +34,14 @@ import scipy.sparse.linalg as spla
 import stiefel
 from stiefel.sparse_factor import SymmetricFactor
 
+from .active_set import ActiveSetPreconditioner
 from .admm import ADMMOptions, admm, admm_sequential, l1_weights_np, orthonormalize
 from .energies import cmm_energy
 
 __all__ = ["CMMResult", "compressed_modes", "select_mu", "METHODS", "unpack_laplacian", "first_eigenpairs"]
 
 METHODS = ("block", "sequential", "admm", "admm_sequential", "fast")
+PRECONDITIONERS = ("shifted", "active_set")
 
 
 @dataclasses.dataclass
@@ -131,6 +133,42 @@ def _continuation(eps: float, steps: int, start: float) -> list[float]:
     return list(np.geomspace(start, eps, steps))
 
 
+def _block_rounds(F, manifold, X, P, *, gtol: float, ftol: float, max_iters: int, refresh: int | None = None):
+    """Riemannian CG on the block, in one run (fixed ``P``) or in rounds of ``refresh``
+    iterations with an ``ActiveSetPreconditioner`` rebuilt before each round.
+
+    Returns ``(X, iterations, status, run seconds (incl. refreshes), compile seconds,
+    history {"time", "value", "monitor"})``; a round that ends converged ends the run.
+    """
+    if not isinstance(P, ActiveSetPreconditioner):
+        res = stiefel.minimize(F, manifold, X, method="cg", preconditioner=P, gtol=gtol, ftol=ftol,
+                               max_iters=max_iters, monitor=F.true_value)
+        h = res.trimmed_history()
+        h["time"] = np.linspace(0.0, res.wall_time, len(h["value"]))
+        return res.x, int(res.iterations), res.status_name, res.wall_time, res.compile_time, h
+    done, wall, compile_t, status = 0, 0.0, 0.0, "max_iters"
+    parts: dict = {"time": [], "value": [], "monitor": []}
+    while done < max_iters:
+        t0 = time.perf_counter()
+        P.refresh(X)
+        wall += time.perf_counter() - t0
+        res = stiefel.minimize(F, manifold, X, method="cg", preconditioner=P.apply, gtol=gtol, ftol=ftol,
+                               max_iters=min(refresh, max_iters - done), monitor=F.true_value, check=False)
+        h = res.trimmed_history()
+        first = 0 if done == 0 else 1  # a later round's entry 0 repeats the previous round's last
+        parts["time"].append(wall + np.linspace(0.0, res.wall_time, len(h["value"]))[first:])
+        parts["value"].append(h["value"][first:])
+        parts["monitor"].append(h["monitor"][first:])
+        wall += res.wall_time
+        compile_t += res.compile_time
+        done += int(res.iterations)
+        X = res.x
+        if res.status_name != "max_iters":
+            status = res.status_name
+            break
+    return X, done, status, wall, compile_t, {key: np.concatenate(v) for key, v in parts.items()}
+
+
 def compressed_modes(
     lap,
     k: int,
@@ -149,7 +187,8 @@ def compressed_modes(
     continuation: int = 1,
     continuation_start: float = 1e-1,
     preconditioner_shift: float | None = None,
-    preconditioner_l1: float = 0.0,
+    preconditioner: str = "shifted",
+    refresh: int = 50,
     admm_options: ADMMOptions | None = None,
     local_functions=None,
     callback=None,
@@ -174,11 +213,12 @@ def compressed_modes(
         the target ε/δ (1, the default: none — from the eigenbasis start, going straight
         to the target smoothing reached the ADMM objective far sooner on fandisk; more
         stages can find lower minima on long runs, MATH.md notes).
-      preconditioner_shift: σ in ``(W + σA + γ(μ/δ)·diag(w))⁻¹`` (default: λ₁, the first non-zero eigenvalue).
-      preconditioner_l1: γ, a share of the Huber curvature ``μw_i/δ`` added to the
-        preconditioner's diagonal (default 0). Measured (k = 10, μ = 0.01n, uniform, γ = 0.3):
-        iterations to ADMM's objective camelhead 747 → 420, armadillo 621 → 309, but fandisk
-        95 → 185; hence off by default.
+      preconditioner_shift: σ in ``(W + σA)⁻¹`` (default: λ₁, the first non-zero eigenvalue).
+      preconditioner: manifold methods' preconditioner: ``"shifted"`` (``(W + σA)⁻¹``, one
+        factorisation) or, for ``method="block"``, ``"active_set"``
+        (``objectives.active_set``: per column, ``W + σA`` plus the ℓ1 curvature on the entries
+        pinned at zero, rebuilt every ``refresh`` iterations).
+      refresh: iterations per round of the active-set preconditioner.
       admm_options: ``ADMMOptions`` for the ADMM methods.
       local_functions: ``(n, d)`` sparse U for ``method="fast"``.
       callback: for ``method="sequential"``, ``callback(j, info)`` after each finished column
@@ -239,12 +279,13 @@ def compressed_modes(
         history = {"time": res.history["time"], "objective": res.history["objective"]}
     else:
         sigma = preconditioner_shift if preconditioner_shift is not None else float(max(evals[1], 1e-12))
-        if preconditioner_l1 > 0:
-            w = l1_weights_np(a, weighting)
-            K = W + sp.diags_array(sigma * a + preconditioner_l1 * mu * w / min(eps, delta))
-            P = stiefel.as_operator(K)
-        else:
-            P = stiefel.shifted_inverse(W, a, sigma)
+        if preconditioner not in PRECONDITIONERS:
+            raise ValueError(f"unknown preconditioner {preconditioner!r}; choose one of {PRECONDITIONERS}")
+        if preconditioner == "active_set" and method != "block":
+            raise ValueError("preconditioner='active_set' needs method='block'")
+        if refresh < 1:
+            raise ValueError(f"refresh must be ≥ 1, got {refresh}")
+        P = stiefel.shifted_inverse(W, a, sigma) if preconditioner == "shifted" else None
         energy = cmm_energy(W, a, mu, smoothing=smoothing, eps=eps, delta=delta, weighting=weighting)
         schedule = _continuation(min(eps, delta), continuation, continuation_start)
         ratio_e, ratio_d = eps / min(eps, delta), delta / min(eps, delta)
@@ -257,13 +298,19 @@ def compressed_modes(
         for stage, s in enumerate(schedule):
             F = energy.with_params(eps=s * ratio_e, delta=s * ratio_d)
             if method == "block":
-                res = stiefel.minimize(F, manifold, X, method="cg", preconditioner=P, gtol=gtol, ftol=ftol,
-                                       max_iters=max_iters, monitor=F.true_value)
-                X = res.x
-                iters += int(res.iterations)
-                st = res.status_name
-                h = res.trimmed_history()
+                if P is None:
+                    active = ActiveSetPreconditioner(W, a, sigma, mu, l1_weights_np(a, weighting), s)
+                    run = _block_rounds(F, manifold, X, active, gtol=gtol, ftol=ftol, max_iters=max_iters,
+                                        refresh=refresh)
+                else:
+                    run = _block_rounds(F, manifold, X, P, gtol=gtol, ftol=ftol, max_iters=max_iters)
+                X, it_stage, st, t_run, t_compile, h = run
+                iters += it_stage
                 true_values.extend(list(h["monitor"]))
+                times.extend(list(wall + h["time"]))
+                values.extend(list(h["value"]))
+                wall += t_run
+                compile_t += t_compile
             else:
                 res = stiefel.minimize_sequential(F, a, k, X0=np.asarray(X), preconditioner=P, gtol=gtol,
                                                   max_iters=max_iters, dtype=dtype, callback=callback)
@@ -271,11 +318,10 @@ def compressed_modes(
                 iters += int(np.sum(np.asarray(res.iterations)))
                 names = set(res.status_names)
                 st = "converged" if names == {"converged"} else sorted(names - {"converged"})[0]
-                h = {"value": np.atleast_1d(float(res.value))}
-            times.extend(list(wall + np.linspace(0, res.wall_time, len(h["value"]))))
-            values.extend(list(h["value"]))
-            wall += res.wall_time
-            compile_t += res.compile_time
+                times.append(wall + res.wall_time)
+                values.append(float(res.value))
+                wall += res.wall_time
+                compile_t += res.compile_time
             if st != "converged":
                 status = st
         Psi = np.asarray(X, dtype=np.float64)
