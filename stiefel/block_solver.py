@@ -129,7 +129,9 @@ def _core(F, manifold: GeneralizedStiefel, P, X0, monitor, opts: BlockOptions):
         guess = jnp.where(c.it > 0, 2.02 * (c.F - c.F_prev) / slope, c.step)
         guess = jnp.where(jnp.isfinite(guess) & (guess > 0), guess, c.step)
         tau0 = jnp.minimum(guess, xi_norm_cap / eta_norm)
-        phi = along_curve(F, lambda t: manifold.retract(c.X, t * eta))
+        line = getattr(F, "line", None)  # an objective may evaluate F ∘ R_X(τη) faster itself
+        phi = line(manifold, c.X, eta) if callable(line) else None
+        phi = phi if phi is not None else along_curve(F, lambda t: manifold.retract(c.X, t * eta))
         ls = strong_wolfe(phi, c.F, slope, tau0, c1=c1, c2=c2, max_evals=ls_max_evals, value_scale=F0)
         X_new = manifold.retract(c.X, ls.step * eta)
         return X_new, ls.step, ls.accepted, ls.n_evals, eta, restart
@@ -254,6 +256,9 @@ def minimize(
 
     Args:
       F: ``X (n, k) -> scalar``, a JAX-differentiable function (gradient by ``jax.grad``).
+        An objective may also define ``F.line(manifold, X, η)`` returning
+        ``τ ↦ (F(R_X(τη)), d/dτ)`` (or None) to evaluate line-search trials faster than
+        through the retraction (``objectives.CMMEnergy`` does, for the Cholesky retraction).
       manifold: a ``GeneralizedStiefel`` (its metric and retraction are used).
       X0: start, shape ``(n, k)``, on the manifold (``manifold.project_to_manifold``).
       method: ``"cg"`` (Riemannian CG + strong Wolfe) or ``"bb"`` (BB + nonmonotone Armijo).

@@ -295,3 +295,30 @@ def test_order_by_compressed_eigenvalue(problem):
     assert np.all(np.diff(lam) > 0)
     ties = jnp.asarray(np.repeat(X[:, :1], 3, axis=1))
     np.testing.assert_array_equal(np.asarray(E.order_by_compressed_eigenvalue(Ws, area, ties, mu)), [0, 1, 2])
+
+
+def test_cmm_line_matches_the_retraction_curve():
+    """CMMEnergy.line (k×k Gram algebra) equals F(R_X(τη)) and its τ-derivative through the Cholesky retraction."""
+    import scipy.sparse as sp
+
+    import stiefel
+    from objectives import cmm_energy
+    from stiefel.linesearch import along_curve
+
+    rng = np.random.default_rng(5)
+    n, k = 60, 4
+    B = sp.random(n, n, density=0.08, random_state=6)
+    W = sp.csr_array(B @ B.T)
+    a = rng.uniform(0.5, 2.0, n) / n
+    F = cmm_energy(W, a, 3.0, smoothing="f6", eps=1e-2, delta=1e-2, weighting="area")
+    man = stiefel.GeneralizedStiefel(a, k, retraction="cholesky")
+    X = man.random_point(jax.random.PRNGKey(0))
+    eta = man.random_tangent(jax.random.PRNGKey(1), X)
+    fast = F.line(man, X, eta)
+    ref = along_curve(F, lambda t: man.retract(X, t * eta))
+    for t in (0.0, 0.03, 0.4, 2.0):
+        f1, g1 = fast(jnp.asarray(t))
+        f0, g0 = ref(jnp.asarray(t))
+        np.testing.assert_allclose(f1, f0, rtol=1e-11)
+        np.testing.assert_allclose(g1, g0, rtol=1e-9, atol=1e-11 * abs(float(f0)))
+    assert F.line(stiefel.GeneralizedStiefel(a, k, retraction="polar"), X, eta) is None
