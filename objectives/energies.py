@@ -31,7 +31,7 @@ import numpy as np
 import scipy.sparse as sp
 from jaxtyping import Array, ArrayLike, Float, Int
 
-from stiefel.operators import DiagonalOperator, LinearOperator, SparseOperator, quadratic_form
+from stiefel.operators import DenseOperator, DiagonalOperator, LinearOperator, SparseOperator, quadratic_form
 
 from . import smoothings as _smoothings
 
@@ -49,22 +49,6 @@ __all__ = [
 Weighting = Literal["area", "uniform"]
 
 
-class _DenseMatvec(LinearOperator):
-    """A dense ``(n, n)`` matrix used only through ``mv`` (no factorisation; W may be singular)."""
-
-    matrix: Float[Array, "n n"]
-
-    @property
-    def n(self) -> int:
-        return self.matrix.shape[0]
-
-    def mv(self, x):
-        return self.matrix @ x
-
-    def diagonal(self):
-        return jnp.diagonal(self.matrix)
-
-
 def _as_matvec(W) -> LinearOperator:
     """Anything with ``.mv``, a ``scipy.sparse`` matrix, or a dense 2-D array → operator."""
     if hasattr(W, "mv"):
@@ -73,7 +57,7 @@ def _as_matvec(W) -> LinearOperator:
         return SparseOperator.from_scipy(W)
     arr = jnp.asarray(W)
     if arr.ndim == 2 and arr.shape[0] == arr.shape[1]:
-        return _DenseMatvec(arr)
+        return DenseOperator(arr)  # products only: W may be singular
     raise TypeError(
         f"W must be an operator with .mv (e.g. stiefel.operators.SparseOperator), a scipy.sparse "
         f"matrix or a square 2-D array; got {type(W).__name__} with shape {getattr(W, 'shape', None)}"

@@ -91,10 +91,13 @@ class DiagonalOperator(LinearOperator):
 
 
 class DenseOperator(LinearOperator):
-    """A dense SPD matrix with its lower Cholesky factor ``L`` (``M = L Lᵀ``)."""
+    """A dense symmetric matrix with its lower Cholesky factor ``L`` (``M = L Lᵀ``) when SPD.
+
+    ``chol=None`` gives a product-only operator (e.g. a singular stiffness matrix W).
+    """
 
     matrix: Float[Array, "n n"]
-    chol: Float[Array, "n n"]
+    chol: Float[Array, "n n"] | None = None
 
     @property
     def n(self) -> int:
@@ -104,6 +107,8 @@ class DenseOperator(LinearOperator):
         return self.matrix @ x
 
     def solve(self, y):
+        if self.chol is None:
+            raise ValueError("this DenseOperator has no Cholesky factor (built for products only); no solve")
         return jax.scipy.linalg.cho_solve((self.chol, True), y)
 
     def diagonal(self):

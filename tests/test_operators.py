@@ -146,3 +146,11 @@ def test_quadratic_form_value_and_derivatives(k):
     np.testing.assert_allclose(g_vals, ref, rtol=1e-12, atol=1e-12)
     batched = jax.vmap(lambda Y: quadratic_form(op, Y))(jnp.stack([X, 2 * X]))
     np.testing.assert_allclose(batched, [np.sum(Xn * (W @ Xn)), 4 * np.sum(Xn * (W @ Xn))], rtol=1e-12)
+
+
+def test_dense_operator_without_factor_is_product_only():
+    M = jnp.asarray([[1.0, -1.0], [-1.0, 1.0]])  # singular: a graph Laplacian
+    op = DenseOperator(M)
+    np.testing.assert_allclose(op.mv(jnp.ones(2)), [0.0, 0.0])
+    with pytest.raises(ValueError, match="no Cholesky factor"):
+        op.solve(jnp.ones(2))
