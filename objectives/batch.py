@@ -33,7 +33,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import scipy.sparse as sp
-from jaxtyping import Array, ArrayLike, Float, Int
+from jaxtyping import Array, ArrayLike, Float
 
 import stiefel
 from stiefel.operators import SparseOperator
@@ -41,7 +41,7 @@ from stiefel.operators import SparseOperator
 from .cmm import first_eigenpairs, unpack_laplacian
 from .energies import CMMEnergy, cmm_energy
 
-__all__ = ["BatchResult", "cmm_batch", "cmm_problem", "default_options", "PRECONDITIONERS"]
+__all__ = ["BatchResult", "CMMProblem", "cmm_batch", "cmm_problem", "default_options", "PRECONDITIONERS"]
 
 PRECONDITIONERS = ("shifted", "jacobi", None)
 
@@ -80,15 +80,20 @@ class BatchResult:
         return [stiefel.Status.name(s) for s in self.status]
 
 
-class _Problem(eqx.Module):
-    """The pieces a solve needs, as one pytree (arrays traced, the rest static)."""
+class CMMProblem(eqx.Module):
+    """The pieces of a CMM solve, as one pytree (arrays traced, the rest static).
+
+    energy: ``CMMEnergy`` (its μ, ε, δ are replaced per solve); manifold: ``XᵀAX = I`` with A
+    diagonal, ``(n, k)`` points; precond: an operator whose ``solve`` applies the preconditioner
+    (``SparseOperator`` with SuperLU, ``DiagonalOperator``), or None.
+    """
 
     energy: CMMEnergy
     manifold: stiefel.GeneralizedStiefel
     precond: eqx.Module | None
 
 
-def _solve_one(problem: _Problem, mu: Float[Array, ""], eps: Float[Array, ""], delta: Float[Array, ""],
+def _solve_one(problem: CMMProblem, mu: Float[Array, ""], eps: Float[Array, ""], delta: Float[Array, ""],
                X0: Float[Array, "n k"], options: stiefel.BlockOptions):
     """One CMM solve: ``(X (n, k), smoothed value, true value, iterations, status, max|XᵀAX − I|)``."""
     F = problem.energy.with_params(mu=mu, eps=eps, delta=delta)
@@ -100,7 +105,7 @@ def _solve_one(problem: _Problem, mu: Float[Array, ""], eps: Float[Array, ""], d
 
 def cmm_problem(lap, k: int, *, smoothing: str = "f6", weighting: str = "area",
                 preconditioner: str | None = "shifted", sigma: float | None = None, dtype=None,
-                callback_vmap: str = "sequential") -> tuple[_Problem, np.ndarray]:
+                callback_vmap: str = "sequential") -> tuple[CMMProblem, np.ndarray]:
     """The energy, manifold (A-orthonormality, Cholesky retraction) and preconditioner of a CMM
     problem in ``dtype``, and the eigenbasis start ``(n, k)`` (float64 numpy).
 
@@ -122,7 +127,7 @@ def cmm_problem(lap, k: int, *, smoothing: str = "f6", weighting: str = "area",
         precond = stiefel.DiagonalOperator(jnp.asarray(K.diagonal(), dtype=dtype))
     else:
         precond = None
-    return _Problem(energy, manifold, precond), evecs[:, :k]
+    return CMMProblem(energy, manifold, precond), evecs[:, :k]
 
 
 def _broadcast(mus, eps, delta, starts, default_start, batch):
@@ -198,7 +203,7 @@ def cmm_batch(
     wall = compile_t = 0.0
     for name in dict.fromkeys(per_member):  # one compiled group per smoothing function
         idx = np.array([i for i, s in enumerate(per_member) if s == name])
-        prob = _Problem(_with_smoothing(problem.energy, name), problem.manifold, problem.precond)
+        prob = CMMProblem(_with_smoothing(problem.energy, name), problem.manifold, problem.precond)
         args = [jnp.asarray(v[idx], dtype=dt) for v in (mus_b, eps_b, delta_b)] + [X0[idx]]
         group, t_c, t_r = _run_group(prob, args, options, mode)
         wall, compile_t = wall + t_r, compile_t + t_c
@@ -219,7 +224,7 @@ def _with_smoothing(energy: CMMEnergy, name: str) -> CMMEnergy:
                      smoothing=info(name).name, weighting=energy.weighting)
 
 
-def _run_group(problem: _Problem, args: list, options: stiefel.BlockOptions, mode: str):
+def _run_group(problem: CMMProblem, args: list, options: stiefel.BlockOptions, mode: str):
     """Compile once (timed apart), then run the group vmapped or as a Python loop."""
     dyn, static = eqx.partition(problem, eqx.is_array)
 
