@@ -1,6 +1,5 @@
 """objectives.batch: a vmapped batch of CMM solves equals the same solves one at a time."""
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
