@@ -32,6 +32,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 import stiefel
+from stiefel.operators import SparseOperator
 
 from .admm import ADMMOptions, admm, admm_sequential, l1_weights_np, orthonormalize
 from .energies import cmm_energy
@@ -239,13 +240,16 @@ def compressed_modes(
         if preconditioner_l1 > 0:
             w = l1_weights_np(a, weighting)
             K = W + sp.diags_array(sigma * a + preconditioner_l1 * mu * w / min(eps, delta))
-            P = stiefel.as_operator(K)
         else:
-            P = stiefel.shifted_inverse(W, a, sigma)
-        energy = cmm_energy(W, a, mu, smoothing=smoothing, eps=eps, delta=delta, weighting=weighting)
+            K = W + sp.diags_array(sigma * a)  # stiefel.shifted_inverse(W, a, σ), in `dtype`
+        # every array of the problem in the computation dtype (float32 runs stay float32)
+        dt = np.dtype(dtype or (jnp.float64 if jax.config.jax_enable_x64 else jnp.float32))
+        P = stiefel.as_operator(K, dtype=dt)
+        energy = cmm_energy(SparseOperator.from_scipy(W, dtype=dt), jnp.asarray(a, dtype=dt), mu, smoothing=smoothing,
+                            eps=eps, delta=delta, weighting=weighting)
         schedule = _continuation(min(eps, delta), continuation, continuation_start)
         ratio_e, ratio_d = eps / min(eps, delta), delta / min(eps, delta)
-        X = jnp.asarray(X0)
+        X = jnp.asarray(X0, dtype=dt)
         iters, wall, compile_t, status = 0, 0.0, 0.0, "converged"
         times, values, true_values = [], [], []
         manifold = stiefel.GeneralizedStiefel(a, k, retraction="cholesky", dtype=dtype) if method == "block" else None

@@ -43,3 +43,19 @@ def test_float32_block_solver_matches_float64(lap, preconditioner):
     # the objective (true, non-smooth, evaluated in float64) agrees to a float32-sized tolerance
     f32, f64 = _true_objective(lap, mu, r32.modes[0]), _true_objective(lap, mu, r64.modes[0])
     assert abs(f32 - f64) <= 1e3 * EPS32 * abs(f64)
+
+
+@pytest.mark.parametrize("method, rel_tol", [("block", 1e3 * EPS32), ("sequential", 1e4 * EPS32)])
+def test_compressed_modes_float32(lap, method, rel_tol):
+    """``compressed_modes(dtype=float32)`` builds energy, preconditioner and start in float32 (it used
+    to mix float64 operators into a float32 solve) and matches the float64 objective."""
+    import jax.numpy as jnp
+
+    from objectives.cmm import compressed_modes
+
+    mu = 0.01 * lap.n
+    r32, r64 = (compressed_modes(lap, K, mu, method=method, dtype=dt, max_iters=300) for dt in (jnp.float32,
+                                                                                                jnp.float64))
+    assert r32.status in ("converged", "max_iters")
+    assert abs(r32.objective - r64.objective) <= rel_tol * abs(r64.objective)
+    assert r32.orthogonality <= 1e-12  # returned modes are re-orthonormalised in float64
