@@ -7,6 +7,8 @@
 * ``objectives.cmm`` — ``compressed_modes`` (manifold solvers, ADMM, fast approximation)
   and ``select_mu``; ``objectives.admm`` (Algorithm 3) and ``objectives.fast``
   (Algorithms 7–8).
+* ``objectives.batch`` — ``cmm_batch``: a batch of CMM solves (μ, ε/δ, starts) under
+  ``jax.vmap``, or as a loop of the same compiled solver.
 * ``objectives.bases`` — generalised manifold harmonics (GLMH), LMHs, Hamiltonian
   eigenfunctions, concatenated bases.
 * ``objectives.evaluation`` — reconstruction, reconstruction errors, principal angles,
@@ -17,7 +19,8 @@ This package joins ``stiefel`` (operators) and the mesh quantities (W, A), but
 imports nothing from ``mesh``: callers pass the matrices.
 """
 
-from . import admm, bases, cmm, evaluation, fast, fmaps, smoothings
+from . import admm, bases, batch, cmm, evaluation, fast, fmaps, smoothings
+from .batch import BatchResult, cmm_batch
 from .cmm import CMMResult, compressed_modes, select_mu
 from .energies import (
     CMMEnergy,
@@ -35,6 +38,9 @@ from .smoothings import Smoothing
 __all__ = [
     "admm",
     "bases",
+    "batch",
+    "BatchResult",
+    "cmm_batch",
     "cmm",
     "evaluation",
     "fast",

@@ -32,6 +32,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 import stiefel
+from stiefel.operators import SparseOperator
 from stiefel.sparse_factor import SymmetricFactor
 
 from .active_set import ActiveSetPreconditioner
@@ -285,11 +286,14 @@ def compressed_modes(
             raise ValueError("preconditioner='active_set' needs method='block'")
         if refresh < 1:
             raise ValueError(f"refresh must be ≥ 1, got {refresh}")
-        P = stiefel.shifted_inverse(W, a, sigma) if preconditioner == "shifted" else None
-        energy = cmm_energy(W, a, mu, smoothing=smoothing, eps=eps, delta=delta, weighting=weighting)
+        # every array of the problem in the computation dtype (float32 runs stay float32)
+        dt = np.dtype(dtype or (jnp.float64 if jax.config.jax_enable_x64 else jnp.float32))
+        P = stiefel.as_operator(W + sp.diags_array(sigma * a), dtype=dt) if preconditioner == "shifted" else None
+        energy = cmm_energy(SparseOperator.from_scipy(W, dtype=dt), jnp.asarray(a, dtype=dt), mu, smoothing=smoothing,
+                            eps=eps, delta=delta, weighting=weighting)
         schedule = _continuation(min(eps, delta), continuation, continuation_start)
         ratio_e, ratio_d = eps / min(eps, delta), delta / min(eps, delta)
-        X = jnp.asarray(X0)
+        X = jnp.asarray(X0, dtype=dt)
         iters, wall, compile_t, status = 0, 0.0, 0.0, "converged"
         times, values, true_values = [], [], []
         manifold = stiefel.GeneralizedStiefel(a, k, retraction="cholesky", dtype=dtype) if method == "block" else None

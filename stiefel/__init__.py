@@ -9,6 +9,8 @@ Public API (MATH.md §1–3):
   ``solve_block``, the block solver as a pure jittable/vmappable function.
 * ``Result``, ``SequentialResult``, ``Status``, ``History`` — solver outcomes.
 * ``as_operator``, ``shifted_inverse`` — SPD operators and preconditioners.
+* ``stiefel.sharding`` — ``row_mesh``, ``shard_rows``, ``solve_sharded``: the block solver with
+  ``X`` split by rows over devices (single- or multi-host).
 * Errors: ``StiefelError`` and its subclasses.
 
 float64: the solvers compute in the dtype of the manifold's operator, which is
@@ -35,3 +37,4 @@ from .preconditioning import (
 )
 from .result import History, Result, SequentialResult, Status
 from .sequential import DIRECTIONS, SequentialConstraint, SequentialOptions, minimize_sequential
+from . import sharding

@@ -278,7 +278,8 @@ def minimize(
         in tests) and is unused by ``"bb"``; ls_max_evals: line-search evaluations.
       init_step: first step length in units of 1/‖grad‖; max_move: cap on τ‖η‖ per step.
       bb_gamma: Zhang–Hager averaging parameter (``"bb"``).
-      check: validate ``X0`` (shape, finiteness, on the manifold to 1e-8).
+      check: validate ``X0`` (shape, finiteness, on the manifold to 1e-8, or to 1000 ulps in a
+        lower precision: 1.2e-4 in float32).
       throw: raise ``SolverError`` on ``line_search_failed`` / ``non_finite``.
       monitor: optional JAX function ``X ↦ scalar`` recorded at every iterate in
         ``history.monitor`` (e.g. the true non-smooth objective, for time-to-target curves).
@@ -297,7 +298,7 @@ def minimize(
         raise StiefelError(f"unknown precondition mode {precondition!r}; choose one of {PRECONDITIONING_MODES}")
     X0 = jnp.asarray(X0, dtype=manifold.dtype)
     if check:
-        manifold.check_point(X0)
+        manifold.check_point(X0, atol=max(1e-8, 1e3 * float(jnp.finfo(manifold.dtype).eps)))
     P = as_preconditioner(preconditioner)
     c2 = 0.1 if c2 is None else c2
     opts = BlockOptions(method=method, gtol=float(gtol), xtol=float(xtol), max_iters=int(max_iters), c1=float(c1),

@@ -24,6 +24,7 @@ from __future__ import annotations
 from typing import Any
 
 import hashlib
+from functools import partial
 
 import equinox as eqx
 import jax
@@ -151,6 +152,17 @@ class _HostFactor(_ByContent):
         # traced dtype regardless; for full float64 accuracy set the global flag.
         return self.factor.solve(b).astype(self.dtype, copy=False)
 
+    def batched(self, b: np.ndarray, ndim: int) -> np.ndarray:
+        """Solve for ``b`` of shape ``batch + (n, ...)``: the ``b.ndim − ndim`` leading axes are a
+        ``vmap`` batch (``vmap_method="expand_dims"``), moved behind ``n`` so one host call solves
+        every batch member (same per-column SuperLU solves, one callback instead of one per member)."""
+        lead = b.ndim - ndim
+        if lead == 0:
+            return self(b)
+        moved = np.moveaxis(np.asarray(b), tuple(range(lead)), tuple(range(-lead, 0)))
+        out = self(moved)
+        return np.moveaxis(out, tuple(range(-lead, 0)), tuple(range(lead)))
+
 
 class SparseOperator(LinearOperator):
     """A sparse symmetric matrix as a padded neighbour table (ELL format).
@@ -163,10 +175,19 @@ class SparseOperator(LinearOperator):
     vals: Float[Array, "n w"]
     factor: Any = eqx.field(static=True, default=None)
     csr: Any = eqx.field(static=True, default=None)
+    vmap_method: str = eqx.field(static=True, default="sequential")
 
     @classmethod
-    def from_scipy(cls, matrix, *, factor: bool = False, dtype=None) -> "SparseOperator":
-        """Build from any ``scipy.sparse`` matrix; ``factor=True`` prepares ``solve``."""
+    def from_scipy(cls, matrix, *, factor: bool = False, dtype=None,
+                   vmap_method: str = "sequential") -> "SparseOperator":
+        """Build from any ``scipy.sparse`` matrix; ``factor=True`` prepares ``solve``.
+
+        ``vmap_method`` is how ``solve``'s host callback batches under ``jax.vmap``:
+        ``"sequential"`` (one host call per batch member) or ``"expand_dims"`` (one host
+        call for the whole batch; ``bench/bench_batch.py`` compares them).
+        """
+        if vmap_method not in ("sequential", "expand_dims"):
+            raise ValueError(f"vmap_method must be 'sequential' or 'expand_dims', got {vmap_method!r}")
         csr = sp.csr_array(matrix)
         csr.sum_duplicates()
         csr.sort_indices()
@@ -188,6 +209,7 @@ class SparseOperator(LinearOperator):
             vals=jnp.asarray(vals, dtype=dtype),
             factor=host,
             csr=_Frozen(csr),
+            vmap_method=vmap_method,
         )
 
     @property
@@ -213,11 +235,13 @@ class SparseOperator(LinearOperator):
     def solve(self, y):
         if self.factor is None:
             raise ValueError("this SparseOperator was built without factor=True; no solve available")
-        host = self.factor
+        host, method = self.factor, self.vmap_method
 
         def _callback_solve(_matvec, b):
             shape = jax.ShapeDtypeStruct(b.shape, b.dtype)
-            return jax.pure_callback(host, shape, b, vmap_method="sequential")
+            if method == "sequential":
+                return jax.pure_callback(host, shape, b, vmap_method="sequential")
+            return jax.pure_callback(partial(host.batched, ndim=b.ndim), shape, b, vmap_method="expand_dims")
 
         return jax.lax.custom_linear_solve(self.mv, y, _callback_solve, symmetric=True)
 

@@ -1,0 +1,247 @@
+"""Batches of compressed-manifold-mode solves on one mesh: ``jax.vmap`` over μ, ε/δ and starts.
+
+``cmm_batch(lap, k, mus, ...)`` minimises the smoothed CMM energy (MATH.md §4, thesis
+Def. 3.2.10) ``tr(XᵀWX) + μ_b Σ_ij w_i s_{ε_b,δ_b}(X_ij)`` over ``XᵀAX = I`` for a batch
+``b = 1..B`` of parameters and starts, with ``stiefel.solve_block`` (Riemannian CG) under
+``jax.vmap``: one compiled program, one ``lax.while_loop`` that runs until every member has
+stopped (finished members are frozen by the batched loop's select, so each member's result
+is the one it would have had alone, up to rounding of batched reductions).
+
+What can be batched: anything that is a pytree *leaf* of the problem — μ, ε, δ (the
+smoothing's parameters) and the start ``X0``. What cannot: the smoothing *function*
+(``CMMEnergy.smoothing`` is static) and the shapes (``n``, ``k``); a sequence of
+different smoothings is run as a Python loop over one vmapped group per smoothing.
+
+``mode="loop"`` runs the *same* single-problem solver, compiled once, in a Python loop
+over the batch: the reference the vmapped batch is measured against
+(``bench/bench_batch.py``).
+
+Preconditioners: ``"shifted"`` applies ``(W + σA)⁻¹`` by SuperLU on the host
+(``jax.pure_callback``; under vmap one host call per member, or with
+``callback_vmap="expand_dims"`` one call for the whole batch), ``"jacobi"`` its diagonal
+(pure JAX), ``None`` none.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from typing import Sequence
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import scipy.sparse as sp
+from jaxtyping import Array, ArrayLike, Float
+
+import stiefel
+from stiefel.operators import SparseOperator
+
+from .cmm import first_eigenpairs, unpack_laplacian
+from .energies import CMMEnergy, cmm_energy
+
+__all__ = ["BatchResult", "CMMProblem", "cmm_batch", "cmm_problem", "default_options", "PRECONDITIONERS"]
+
+PRECONDITIONERS = ("shifted", "jacobi", None)
+
+
+def default_options(**overrides) -> stiefel.BlockOptions:
+    """``BlockOptions`` as ``compressed_modes(method="block")`` uses them (CG, c2 = 0.1, ftol = 1e-7)."""
+    base = dict(method="cg", c2=0.1, gtol=1e-6, ftol=1e-7, max_iters=5000)
+    base.update(overrides)
+    return stiefel.BlockOptions(**base)
+
+
+@dataclasses.dataclass
+class BatchResult:
+    """Stacked outcome of ``cmm_batch`` (batch size B).
+
+    modes: ``(B, n, k)`` final iterates (not re-sorted, not re-orthonormalised).
+    value: ``(B,)`` smoothed objective; objective: ``(B,)`` true objective (f0 = |·|).
+    iterations, status: ``(B,)`` ints (``stiefel.Status`` codes); orthogonality: ``(B,)``
+    ``max|XᵀAX − I|``. wall_time: run seconds (compile excluded); compile_time: seconds;
+    mode: ``"vmap"`` or ``"loop"``; params: ``{"mu", "eps", "delta", "smoothing"}`` per member.
+    """
+
+    modes: np.ndarray
+    value: np.ndarray
+    objective: np.ndarray
+    iterations: np.ndarray
+    status: np.ndarray
+    orthogonality: np.ndarray
+    wall_time: float
+    compile_time: float
+    mode: str
+    params: dict
+
+    @property
+    def status_names(self) -> list[str]:
+        return [stiefel.Status.name(s) for s in self.status]
+
+
+class CMMProblem(eqx.Module):
+    """The pieces of a CMM solve, as one pytree (arrays traced, the rest static).
+
+    energy: ``CMMEnergy`` (its μ, ε, δ are replaced per solve); manifold: ``XᵀAX = I`` with A
+    diagonal, ``(n, k)`` points; precond: an operator whose ``solve`` applies the preconditioner
+    (``SparseOperator`` with SuperLU, ``DiagonalOperator``), or None.
+    """
+
+    energy: CMMEnergy
+    manifold: stiefel.GeneralizedStiefel
+    precond: eqx.Module | None
+
+
+def _solve_one(problem: CMMProblem, mu: Float[Array, ""], eps: Float[Array, ""], delta: Float[Array, ""],
+               X0: Float[Array, "n k"], options: stiefel.BlockOptions):
+    """One CMM solve: ``(X (n, k), smoothed value, true value, iterations, status, max|XᵀAX − I|)``."""
+    F = problem.energy.with_params(mu=mu, eps=eps, delta=delta)
+    P = None if problem.precond is None else problem.precond.solve
+    res = stiefel.solve_block(F, problem.manifold, X0, options, preconditioner=P)
+    return (res.x, res.value, F.true_value(res.x), res.iterations, res.status,
+            problem.manifold.dist_to_manifold(res.x))
+
+
+def cmm_problem(lap, k: int, *, smoothing: str = "f6", weighting: str = "area",
+                preconditioner: str | None = "shifted", sigma: float | None = None, dtype=None,
+                callback_vmap: str = "sequential") -> tuple[CMMProblem, np.ndarray]:
+    """The energy, manifold (A-orthonormality, Cholesky retraction) and preconditioner of a CMM
+    problem in ``dtype``, and the eigenbasis start ``(n, k)`` (float64 numpy).
+
+    ``sigma`` (the shift of ``W + σA``) defaults to λ₁, as in ``compressed_modes``.
+    """
+    if preconditioner not in PRECONDITIONERS:
+        raise ValueError(f"preconditioner must be one of {PRECONDITIONERS}, got {preconditioner!r}")
+    W, a = unpack_laplacian(lap)
+    dtype = np.dtype(dtype or (jnp.float64 if jax.config.jax_enable_x64 else jnp.float32))
+    evals, evecs = first_eigenpairs(W, a, max(k, 2))
+    sigma = float(max(evals[1], 1e-12)) if sigma is None else float(sigma)
+    Wop = SparseOperator.from_scipy(W, dtype=dtype)
+    energy = cmm_energy(Wop, jnp.asarray(a, dtype=dtype), 1.0, smoothing=smoothing, weighting=weighting)
+    manifold = stiefel.GeneralizedStiefel(a, k, retraction="cholesky", dtype=dtype)
+    K = sp.csr_array(W) + sigma * sp.diags_array(a)
+    if preconditioner == "shifted":
+        precond = SparseOperator.from_scipy(K, factor=True, dtype=dtype, vmap_method=callback_vmap)
+    elif preconditioner == "jacobi":
+        precond = stiefel.DiagonalOperator(jnp.asarray(K.diagonal(), dtype=dtype))
+    else:
+        precond = None
+    return CMMProblem(energy, manifold, precond), evecs[:, :k]
+
+
+def _broadcast(mus, eps, delta, starts, default_start, batch):
+    mus, eps, delta = (np.atleast_1d(np.asarray(v, dtype=np.float64)) for v in (mus, eps, delta))
+    if starts is None:
+        starts = default_start
+    starts = np.asarray(starts, dtype=np.float64)
+    sizes = {len(mus), len(eps), len(delta), starts.shape[0] if starts.ndim == 3 else 1, batch or 1} - {1}
+    if len(sizes) > 1:
+        raise ValueError(f"batch sizes disagree: mus {len(mus)}, eps {len(eps)}, delta {len(delta)}, "
+                         f"starts {starts.shape}; give each as a scalar/(n, k) or with one common length B")
+    B = sizes.pop() if sizes else 1
+    if starts.ndim == 2:
+        starts = np.broadcast_to(starts, (B,) + starts.shape)
+    return [np.broadcast_to(v, (B,)) for v in (mus, eps, delta)] + [starts]
+
+
+def cmm_batch(
+    lap,
+    k: int,
+    mus: Float[ArrayLike, " B"] | float,
+    *,
+    starts: Float[ArrayLike, "B n k"] | Float[ArrayLike, "n k"] | None = None,
+    smoothing: str | Sequence[str] = "f6",
+    eps: Float[ArrayLike, " B"] | float = 1e-3,
+    delta: Float[ArrayLike, " B"] | float = 1e-3,
+    weighting: str = "area",
+    preconditioner: str | None = "shifted",
+    sigma: float | None = None,
+    options: stiefel.BlockOptions | None = None,
+    mode: str = "vmap",
+    callback_vmap: str = "sequential",
+    dtype=None,
+) -> BatchResult:
+    """Solve a batch of CMM problems on one mesh (module docstring).
+
+    Args:
+      lap: ``mesh.Laplacian`` (``.W``, ``.A``) or a pair ``(W, A)``, A diagonal.
+      k: number of modes.
+      mus: μ, a scalar or ``(B,)``.
+      starts: None (the first k eigenfunctions, shared), an ``(n, k)`` start shared by all,
+        or ``(B, n, k)`` starts (projected onto ``XᵀAX = I`` here).
+      smoothing: a smoothing name, or a sequence of B names (one vmapped group per name).
+      eps, delta: smoothing parameters, scalars or ``(B,)``.
+      weighting: ``"area"`` or ``"uniform"`` ℓ1 weights.
+      preconditioner: ``"shifted"`` ((W + σA)⁻¹, SuperLU on the host), ``"jacobi"`` (its
+        diagonal, pure JAX) or None.
+      sigma: σ; default λ₁.
+      options: ``stiefel.BlockOptions`` (default ``default_options()``).
+      mode: ``"vmap"`` (one vmapped program) or ``"loop"`` (the single-problem program,
+        compiled once, called B times from Python).
+      callback_vmap: ``"sequential"`` or ``"expand_dims"``: how the SuperLU host callback is
+        batched under vmap (``SparseOperator.from_scipy``).
+      dtype: float32 / float64 (default: float64 if x64 is enabled).
+
+    Returns:
+      ``BatchResult`` with ``(B, ...)`` stacked arrays; compile time reported apart.
+    """
+    if mode not in ("vmap", "loop"):
+        raise ValueError(f"mode must be 'vmap' or 'loop', got {mode!r}")
+    options = options or default_options()
+    names = [smoothing] if isinstance(smoothing, str) else list(smoothing)
+    B_smooth = 0 if isinstance(smoothing, str) else len(names)
+    W, a = unpack_laplacian(lap)
+    problem, X_eig = cmm_problem((W, a), k, smoothing=names[0], weighting=weighting, preconditioner=preconditioner,
+                                 sigma=sigma, dtype=dtype, callback_vmap=callback_vmap)
+    mus_b, eps_b, delta_b, starts_b = _broadcast(mus, eps, delta, starts, X_eig, B_smooth)
+    B = len(mus_b)
+    per_member = names * B if len(names) == 1 else names
+    dt = problem.manifold.dtype
+    X0 = jax.vmap(problem.manifold.project_to_manifold)(jnp.asarray(starts_b, dtype=dt))
+    outs: list = [None] * B
+    wall = compile_t = 0.0
+    for name in dict.fromkeys(per_member):  # one compiled group per smoothing function
+        idx = np.array([i for i, s in enumerate(per_member) if s == name])
+        prob = CMMProblem(_with_smoothing(problem.energy, name), problem.manifold, problem.precond)
+        args = [jnp.asarray(v[idx], dtype=dt) for v in (mus_b, eps_b, delta_b)] + [X0[idx]]
+        group, t_c, t_r = _run_group(prob, args, options, mode)
+        wall, compile_t = wall + t_r, compile_t + t_c
+        for j, i in enumerate(idx):
+            outs[i] = [np.asarray(o[j]) for o in group]
+    X, value, true, it, status, orth = (np.stack([o[m] for o in outs]) for m in range(6))
+    return BatchResult(modes=X, value=value, objective=true, iterations=it, status=status, orthogonality=orth,
+                       wall_time=wall, compile_time=compile_t, mode=mode,
+                       params={"mu": mus_b.copy(), "eps": eps_b.copy(), "delta": delta_b.copy(),
+                               "smoothing": per_member})
+
+
+def _with_smoothing(energy: CMMEnergy, name: str) -> CMMEnergy:
+    """``energy`` with another smoothing function (a static field: a new compiled program)."""
+    from .smoothings import info
+
+    return CMMEnergy(W=energy.W, weights=energy.weights, mu=energy.mu, eps=energy.eps, delta=energy.delta,
+                     smoothing=info(name).name, weighting=energy.weighting)
+
+
+def _run_group(problem: CMMProblem, args: list, options: stiefel.BlockOptions, mode: str):
+    """Compile once (timed apart), then run the group vmapped or as a Python loop."""
+    dyn, static = eqx.partition(problem, eqx.is_array)
+
+    def one(dyn, mu, eps, delta, X0):
+        return _solve_one(eqx.combine(dyn, static), mu, eps, delta, X0, options)
+
+    if mode == "vmap":
+        fn = jax.jit(jax.vmap(one, in_axes=(None, 0, 0, 0, 0)))
+        t0 = time.perf_counter()
+        compiled = fn.lower(dyn, *args).compile()
+        t1 = time.perf_counter()
+        out = jax.block_until_ready(compiled(dyn, *args))
+        return out, t1 - t0, time.perf_counter() - t1
+    fn = jax.jit(one)
+    t0 = time.perf_counter()
+    compiled = fn.lower(dyn, *(x[0] for x in args)).compile()
+    t1 = time.perf_counter()
+    rows = [jax.block_until_ready(compiled(dyn, *(x[i] for x in args))) for i in range(args[0].shape[0])]
+    out = tuple(jnp.stack(parts) for parts in zip(*rows))
+    return out, t1 - t0, time.perf_counter() - t1
