@@ -1,0 +1,344 @@
+"""Scaling benchmark (issue 7, "performance at scale"): CMMs on subdivided surfaces up to ~10⁶ vertices.
+
+A real mesh (default ``bunny.off``, 3 485 vertices, closed, genus 0) is midpoint-subdivided
+(``trimesh.Trimesh.subdivide``; each level ×4 faces, ≈ ×4 vertices) to 1.4·10⁴, 5.6·10⁴,
+2.2·10⁵ and 8.9·10⁵ vertices (levels 1–4). The subdivided meshes are cached as ``.npz`` under
+``--cache`` (default ``$XDG_CACHE_HOME/stiefel-cmm/bench``, never in the repository). For every
+size, in a fresh subprocess (so that its peak RSS is its own):
+
+* load/validation (``mesh.from_arrays``) and Laplacian assembly (cotangent W, lumped A, unit area);
+* ``eigsh`` shift-invert (``objectives.cmm.first_eigenpairs``) for k = 10 and k = 50 — skipped
+  when the time predicted from the previous size (exponent 1.5) exceeds ``--eigsh-budget``;
+* the CMM block solver (``stiefel.minimize``, Riemannian CG, Cholesky retraction, residual
+  preconditioning by ``(W + λ₁A)⁻¹``, Huber smoothing δ = 1e-3, μ = 0.01·n, uniform
+  weighting) for a fixed ``--iters`` iterations (gtol = 0), from the eigenbasis:
+  ms/iteration, split into the preconditioner's one-off SuperLU factorisation and, per
+  iteration, one preconditioner application (k triangular solve pairs on the host), the
+  objective+gradient evaluations (× evaluations per iteration) and the rest;
+* for n ≤ ``--total-max-n``: the total time to a modest tolerance (``ftol`` = 1e-5: relative
+  decrease over 20 iterations, or gtol = 1e-4, at most ``--total-iters`` iterations);
+* peak RSS of the subprocess, against ``n·k·8`` bytes (one (n, k) float64 block), ``nnz(W)``
+  and the LU's ``nnz(L + U)``.
+
+Then log–log fits ``t ∝ n^p`` of every timing over the sizes. Bar (c) of the issue: ``p ≤ 1.15``
+for the solver's time per iteration up to 10⁶ vertices.
+
+    python -m bench.scaling                       # levels 1–4, k = 10 and 50 (≈ 20 min on 2 cores)
+    python -m bench.scaling --levels 1 2 --ks 10 --iters 10 --out-json /tmp/s.json --out-md /tmp/s.md
+
+Writes ``bench/results_scaling.json`` and ``bench/RESULTS_scaling.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import platform
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+# One BLAS thread (see bench/bench_mesh.py): on the shared 2-core machine threaded OpenBLAS
+# made ARPACK several times slower. Set before numpy is imported; an explicit setting wins.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+import jax  # noqa: E402
+
+jax.config.update("jax_enable_x64", True)  # benchmark script (an application), not library code
+
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+import scipy  # noqa: E402
+
+MESHES = ROOT.parent / "shared" / "meshes"
+HERE = Path(__file__).resolve().parent
+
+
+def default_cache() -> Path:
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "stiefel-cmm" / "bench"
+
+
+def subdivided(base: str, level: int, cache: Path) -> tuple[np.ndarray, np.ndarray, bool]:
+    """``(V, F, from_cache)`` of ``base`` midpoint-subdivided ``level`` times (cached as .npz)."""
+    import trimesh
+
+    cache.mkdir(parents=True, exist_ok=True)
+    path = cache / f"{Path(base).stem}_sub{level}.npz"
+    if path.exists():
+        z = np.load(path)
+        return z["V"], z["F"], True
+    import mesh
+
+    m = mesh.load(MESHES / base if not Path(base).exists() else base, warn=False)
+    tm = trimesh.Trimesh(m.vertices, m.faces, process=False)
+    for _ in range(level):
+        tm = tm.subdivide()
+    V, F = np.asarray(tm.vertices, dtype=np.float64), np.asarray(tm.faces, dtype=np.int64)
+    np.savez(path, V=V, F=F)
+    return V, F, False
+
+
+def _rss_bytes() -> int:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024  # Linux: KiB
+
+
+def _timed(fn, repeats=3):
+    fn()  # warm-up (compilation)
+    ts = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        jax.block_until_ready(fn())
+        ts.append(time.perf_counter() - t0)
+    return float(np.median(ts))
+
+
+def worker(args) -> dict:
+    """One size, in its own process: returns the row (printed as JSON by ``main``)."""
+    import stiefel
+    import mesh
+    from objectives.cmm import first_eigenpairs
+    from objectives.energies import cmm_energy
+
+    V, F, cached = subdivided(args.base, args.worker, Path(args.cache))
+    row: dict = {"level": args.worker, "mesh_cached": cached}
+    t0 = time.perf_counter()
+    m = mesh.load((V, F), warn=False)
+    row["load_seconds"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    lap = mesh.laplacian(m, weights="cotangent", area="lumped")
+    row["assembly_seconds"] = time.perf_counter() - t0
+    del V, F
+    W, a = lap.W.tocsr(), np.asarray(lap.A.diagonal())
+    n = int(a.shape[0])
+    row.update(n=n, n_faces=int(m.n_faces), nnz_W=int(W.nnz))
+    row["rss_after_assembly_bytes"] = _rss_bytes()
+    prior = {int(k): v for k, v in json.loads(args.prior or "{}").items()}
+
+    lam1 = None
+    eig = {}
+    evecs_by_k = {}
+    for k in args.ks:
+        pred = prior.get(k)
+        if pred is not None and pred > args.eigsh_budget:
+            eig[k] = {"seconds": None, "skipped": f"predicted {pred:.0f} s > budget {args.eigsh_budget:.0f} s"}
+            continue
+        t0 = time.perf_counter()
+        vals, vecs = first_eigenpairs(W, a, k)
+        eig[k] = {"seconds": time.perf_counter() - t0, "lambda_1": float(vals[1]), "lambda_k": float(vals[-1])}
+        lam1 = float(vals[1])
+        evecs_by_k[k] = vecs
+        print(json.dumps({"n": n, "eigsh_k": k, **eig[k]}), file=sys.stderr, flush=True)
+    row["eigsh"] = {str(k): v for k, v in eig.items()}
+    row["rss_after_eigsh_bytes"] = _rss_bytes()
+
+    if lam1 is None:  # no eigsh at all: a rough σ from the mesh's spectral scale
+        lam1 = 1.0
+    t0 = time.perf_counter()
+    P = stiefel.shifted_inverse(W, a, lam1)
+    row["factor_seconds"] = time.perf_counter() - t0
+    lu = getattr(getattr(P, "factor", None), "lu", None)
+    row["lu_nnz"] = int(lu.L.nnz + lu.U.nnz) if lu is not None else None
+    row["rss_after_factor_bytes"] = _rss_bytes()
+
+    mu = args.mu_factor * n
+    energy = cmm_energy(W, a, mu, smoothing="f6", eps=1e-3, delta=1e-3, weighting="uniform")
+    row["solver"] = {}
+    for k in args.ks:
+        manifold = stiefel.GeneralizedStiefel(a, k, retraction="cholesky")
+        if k in evecs_by_k:
+            X0, start = evecs_by_k[k], "eigen"
+        else:
+            X0, start = np.asarray(manifold.random_point(jax.random.PRNGKey(0))), "random"
+        X0 = manifold.project_to_manifold(jnp.asarray(X0))
+        res = stiefel.minimize(energy, manifold, X0, method="cg", preconditioner=P, gtol=0.0,
+                               max_iters=args.iters, check=False)
+        iters = int(res.iterations)
+        fevals = int(res.stats["n_fevals"])
+        solve_P = jax.jit(lambda Y: P.solve(Y))
+        apply_P = _timed(lambda: solve_P(X0))
+        vg = jax.jit(lambda X: jax.value_and_grad(energy)(X))
+        fg = _timed(lambda X=X0: vg(X))
+        ms_it = 1e3 * res.wall_time / max(iters, 1)
+        per_it_P, per_it_F = 1e3 * apply_P, 1e3 * fg * (fevals / max(iters, 1))
+        srow = {"start": start, "iterations": iters, "status": res.status_name, "wall_seconds": res.wall_time,
+                "compile_seconds": res.compile_time, "ms_per_iteration": ms_it, "fevals": fevals,
+                "fevals_per_iteration": fevals / max(iters, 1), "ms_precond_apply": per_it_P,
+                "ms_value_and_grad": 1e3 * fg, "ms_fevals_per_iteration": per_it_F,
+                "ms_rest_per_iteration": ms_it - per_it_P - per_it_F,
+                "block_bytes": n * k * 8}
+        del res
+        if n <= args.total_max_n:
+            tot = stiefel.minimize(energy, manifold, X0, method="cg", preconditioner=P, gtol=1e-4, ftol=1e-5,
+                                   max_iters=args.total_iters, check=False, monitor=energy.true_value)
+            h = tot.trimmed_history()
+            srow["total"] = {"seconds": tot.wall_time, "iterations": int(tot.iterations), "status": tot.status_name,
+                             "objective_start": float(h["monitor"][0]), "objective_final": float(h["monitor"][-1])}
+            del tot
+        row["solver"][str(k)] = srow
+        print(json.dumps({"n": n, "k": k, **{kk: v for kk, v in srow.items() if kk != "total"}}), file=sys.stderr,
+              flush=True)
+    row["peak_rss_bytes"] = _rss_bytes()
+    return row
+
+
+def fit_exponent(ns, ts) -> float | None:
+    pts = [(n, t) for n, t in zip(ns, ts) if t is not None and t > 0]
+    if len(pts) < 2:
+        return None
+    x, y = np.log([p[0] for p in pts]), np.log([p[1] for p in pts])
+    return float(np.polyfit(x, y, 1)[0])
+
+
+def exponents(rows, ks) -> dict:
+    ns = [r["n"] for r in rows]
+    out = {"assembly": fit_exponent(ns, [r["assembly_seconds"] for r in rows]),
+           "load": fit_exponent(ns, [r["load_seconds"] for r in rows]),
+           "factorisation": fit_exponent(ns, [r["factor_seconds"] for r in rows]),
+           "lu_nnz": fit_exponent(ns, [r["lu_nnz"] for r in rows]),
+           "peak_rss": fit_exponent(ns, [r["peak_rss_bytes"] for r in rows])}
+    for k in ks:
+        s = str(k)
+        out[f"eigsh_k{k}"] = fit_exponent(ns, [r["eigsh"].get(s, {}).get("seconds") for r in rows])
+        sol = [r["solver"].get(s) for r in rows]
+        out[f"ms_per_iteration_k{k}"] = fit_exponent(ns, [x and x["ms_per_iteration"] for x in sol])
+        out[f"precond_apply_k{k}"] = fit_exponent(ns, [x and x["ms_precond_apply"] for x in sol])
+        out[f"value_and_grad_k{k}"] = fit_exponent(ns, [x and x["ms_value_and_grad"] for x in sol])
+        tot = [x["total"]["seconds"] if x and "total" in x else None for x in sol]
+        out[f"total_k{k}"] = fit_exponent(ns, tot)
+    return out
+
+
+def _fmt(v, f="{:.2f}"):
+    return "–" if v is None else f.format(v)
+
+
+def markdown(meta, rows, exps, ks) -> str:
+    mib = 2.0**20
+    out = ["# Scaling: CMM block solver, eigsh and assembly up to ~10⁶ vertices (generated by bench/scaling.py)", "",
+           "## Recipe", "",
+           f"* date: {meta['date']}", f"* machine: {meta['machine']}", f"* versions: {meta['versions']}",
+           f"* JAX backend: {meta['backend']} ({meta['device']}); no GPU in this session",
+           f"* OPENBLAS_NUM_THREADS={meta['openblas_threads']}",
+           f"* command: `{meta['command']}`",
+           f"* meshes: `{meta['base']}` midpoint-subdivided (levels {meta['levels']}), cached in `{meta['cache']}`",
+           f"* solver: Riemannian CG, Cholesky retraction, `(W + λ₁A)⁻¹` residual preconditioning (SuperLU, "
+           f"MMD_AT_PLUS_A, symmetric mode), Huber δ = 1e-3, μ = {meta['mu_factor']}·n, uniform weighting, "
+           f"eigenbasis start, {meta['iters']} iterations with gtol = 0 (timing); total: gtol 1e-4 / ftol 1e-5, "
+           f"≤ {meta['total_iters']} iterations, for n ≤ {meta['total_max_n']:.0f}",
+           "* each size ran in its own subprocess; peak RSS is that process's `ru_maxrss` (includes the "
+           "Python/JAX runtime, ~0.3–0.5 GiB)", "",
+           "## Setup per size", "",
+           "| n | faces | nnz(W) | load s | assembly s | factor (W+λ₁A) s | nnz(L+U) | fill nnz(L+U)/nnz(W) "
+           "| " + " | ".join(f"eigsh k={k} s" for k in ks) + " | peak RSS MiB |",
+           "|---:|---:|---:|---:|---:|---:|---:|---:|" + "---:|" * len(ks) + "---:|"]
+    for r in rows:
+        eigs = []
+        for k in ks:
+            e = r["eigsh"].get(str(k), {})
+            eigs.append(_fmt(e.get("seconds")) if e.get("seconds") is not None else f"skipped ({e.get('skipped', '')})")
+        fill = r["lu_nnz"] / r["nnz_W"] if r["lu_nnz"] else None
+        out.append(f"| {r['n']} | {r['n_faces']} | {r['nnz_W']} | {r['load_seconds']:.2f} | {r['assembly_seconds']:.2f} | "
+                   f"{r['factor_seconds']:.2f} | {_fmt(r['lu_nnz'], '{:d}')} | {_fmt(fill, '{:.1f}')} | "
+                   + " | ".join(eigs) + f" | {r['peak_rss_bytes'] / mib:.0f} |")
+    out += ["", "## Block solver per iteration", "",
+            "ms/it: wall time of the fixed-length run ÷ iterations (compile apart). Split: one preconditioner "
+            "application `P·Y` (Y: n×k), objective+gradient evaluations (ms per evaluation × evaluations per "
+            "iteration, line-search trials included), rest (retraction, projections, CG bookkeeping; "
+            "can be negative where the separately timed parts overlap).", "",
+            "| n | k | ms/it | P apply ms | value+grad ms × evals/it | rest ms | compile s | n·k·8 MiB "
+            "| total: s (it., status, objective start → end) |",
+            "|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
+    for r in rows:
+        for k in ks:
+            s = r["solver"].get(str(k))
+            if not s:
+                continue
+            t = s.get("total")
+            tot = (f"{t['seconds']:.1f} ({t['iterations']}, {t['status']}, {t['objective_start']:.2f} → "
+                   f"{t['objective_final']:.2f})") if t else "– (not run at this size)"
+            out.append(f"| {r['n']} | {k} | {s['ms_per_iteration']:.1f} | {s['ms_precond_apply']:.1f} | "
+                       f"{s['ms_value_and_grad']:.1f} × {s['fevals_per_iteration']:.2f} | "
+                       f"{s['ms_rest_per_iteration']:.1f} | {s['compile_seconds']:.1f} | "
+                       f"{s['block_bytes'] / mib:.1f} | {tot} |")
+    out += ["", "## Memory", "",
+            "| n | peak RSS MiB | n·10·8 MiB | n·50·8 MiB | nnz(W)·12 B MiB | nnz(L+U)·12 B MiB | RSS after assembly / eigsh / factor MiB |",
+            "|---:|---:|---:|---:|---:|---:|---|"]
+    for r in rows:
+        lu = r["lu_nnz"] or 0
+        out.append(f"| {r['n']} | {r['peak_rss_bytes'] / mib:.0f} | {r['n'] * 80 / mib:.1f} | {r['n'] * 400 / mib:.1f} | "
+                   f"{r['nnz_W'] * 12 / mib:.1f} | {lu * 12 / mib:.1f} | {r['rss_after_assembly_bytes'] / mib:.0f} / "
+                   f"{r['rss_after_eigsh_bytes'] / mib:.0f} / {r['rss_after_factor_bytes'] / mib:.0f} |")
+    out += ["", "## Fitted exponents p in t ∝ n^p (least squares in log–log over the sizes above)", "",
+            "| quantity | p |", "|---|---:|"]
+    out += [f"| {name} | {_fmt(p)} |" for name, p in exps.items()]
+    return "\n".join(out) + "\n"
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--base", default="bunny.off", help="a mesh in ../shared/meshes or a path")
+    p.add_argument("--levels", type=int, nargs="+", default=[1, 2, 3, 4])
+    p.add_argument("--ks", type=int, nargs="+", default=[10, 50])
+    p.add_argument("--iters", type=int, default=20, help="fixed iterations for the per-iteration timing")
+    p.add_argument("--total-max-n", type=float, default=3e5, help="run to tolerance only up to this n")
+    p.add_argument("--total-iters", type=int, default=300)
+    p.add_argument("--mu-factor", type=float, default=0.01)
+    p.add_argument("--eigsh-budget", type=float, default=300.0, help="skip eigsh when predicted above (s)")
+    p.add_argument("--cache", default=str(default_cache()))
+    p.add_argument("--out-json", default=str(HERE / "results_scaling.json"))
+    p.add_argument("--out-md", default=str(HERE / "RESULTS_scaling.md"))
+    p.add_argument("--worker", type=int, default=None, help=argparse.SUPPRESS)
+    p.add_argument("--prior", default=None, help=argparse.SUPPRESS)
+    args = p.parse_args(argv)
+    if args.worker is not None:
+        print("ROW " + json.dumps(worker(args)), flush=True)
+        return 0
+
+    rows, prior = [], {}
+    t_start = time.perf_counter()
+    for level in args.levels:
+        cmd = [sys.executable, "-m", "bench.scaling", "--worker", str(level), "--base", args.base,
+               "--ks", *map(str, args.ks), "--iters", str(args.iters), "--total-max-n", str(args.total_max_n),
+               "--total-iters", str(args.total_iters), "--mu-factor", str(args.mu_factor),
+               "--eigsh-budget", str(args.eigsh_budget), "--cache", args.cache, "--prior", json.dumps(prior)]
+        proc = subprocess.run(cmd, cwd=ROOT, stdout=subprocess.PIPE, text=True)
+        line = [ln for ln in proc.stdout.splitlines() if ln.startswith("ROW ")]
+        if proc.returncode or not line:
+            print(f"level {level}: worker failed (exit {proc.returncode}); stopping", file=sys.stderr)
+            break
+        row = json.loads(line[-1][4:])
+        rows.append(row)
+        print(json.dumps({"n": row["n"], "done_after_s": time.perf_counter() - t_start}), flush=True)
+        # predict the next size's eigsh time (×4 vertices, exponent 1.5)
+        for k, e in row["eigsh"].items():
+            prior[int(k)] = e["seconds"] * 4.0**1.5 if e.get("seconds") else float("inf")
+    exps = exponents(rows, args.ks)
+    dev = jax.devices()[0]
+    meta = {"date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+            "machine": f"{platform.machine()}, {os.cpu_count()} cores, {platform.platform()}",
+            "versions": f"python {platform.python_version()}, numpy {np.__version__}, scipy {scipy.__version__}, "
+                        f"jax {jax.__version__}",
+            "backend": jax.default_backend(), "device": getattr(dev, "device_kind", str(dev)),
+            "openblas_threads": os.environ.get("OPENBLAS_NUM_THREADS"),
+            "command": "python -m bench.scaling " + " ".join(argv if argv is not None else sys.argv[1:]),
+            "base": args.base, "levels": args.levels, "cache": args.cache, "mu_factor": args.mu_factor,
+            "iters": args.iters, "total_iters": args.total_iters, "total_max_n": args.total_max_n,
+            "ks": args.ks, "total_seconds": time.perf_counter() - t_start}
+    Path(args.out_json).write_text(json.dumps({"meta": meta, "rows": rows, "exponents": exps}, indent=1))
+    md = markdown(meta, rows, exps, args.ks)
+    Path(args.out_md).write_text(md)
+    print(md)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
