@@ -101,6 +101,35 @@ def _timed(fn, repeats=3):
     return float(np.median(ts))
 
 
+def colamd_preconditioner(W, a, sigma):
+    """``Y ↦ (W + σA)⁻¹Y`` with SuperLU in symmetric mode and a COLAMD ordering (bench-side alternative).
+
+    The same factorisation as ``stiefel.shifted_inverse`` (diagonal pivots, symmetric mode, so the
+    order stays symmetric: an LDLᵀ in disguise) except the fill-reducing ordering: COLAMD instead of
+    MMD on AᵀA + A, whose *ordering step* dominated the library's factorisation time at 10⁵ vertices.
+    Applied through ``jax.pure_callback``, one column at a time like the library's operator.
+    """
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    K = sp.csc_matrix(sp.csr_array(W) + sigma * sp.diags_array(a))
+    lu = spla.splu(K, permc_spec="COLAMD", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+    if not np.array_equal(lu.perm_r, lu.perm_c) or not np.all(lu.U.diagonal() > 0):
+        raise RuntimeError("COLAMD/symmetric-mode factorisation lost the symmetric order or a positive pivot")
+
+    def host(b):
+        b = np.asarray(b, dtype=np.float64)
+        out = np.empty_like(b, order="F")
+        for j in range(b.shape[1]):
+            out[:, j] = lu.solve(np.ascontiguousarray(b[:, j]))
+        return out
+
+    def apply(Y):
+        return jax.pure_callback(host, jax.ShapeDtypeStruct(Y.shape, Y.dtype), Y, vmap_method="sequential")
+
+    return apply, lu
+
+
 def worker(args) -> dict:
     """One size, in its own process: returns the row (printed as JSON by ``main``)."""
     import stiefel
@@ -121,7 +150,7 @@ def worker(args) -> dict:
     n = int(a.shape[0])
     row.update(n=n, n_faces=int(m.n_faces), nnz_W=int(W.nnz))
     row["rss_after_assembly_bytes"] = _rss_bytes()
-    prior = {int(k): v for k, v in json.loads(args.prior or "{}").items()}
+    prior = {(int(k) if k.isdigit() else k): v for k, v in json.loads(args.prior or "{}").items()}
 
     lam1 = None
     eig = {}
@@ -140,17 +169,32 @@ def worker(args) -> dict:
     row["eigsh"] = {str(k): v for k, v in eig.items()}
     row["rss_after_eigsh_bytes"] = _rss_bytes()
 
-    if lam1 is None:  # no eigsh at all: a rough σ from the mesh's spectral scale
-        lam1 = 1.0
-    t0 = time.perf_counter()
-    P = stiefel.shifted_inverse(W, a, lam1)
-    row["factor_seconds"] = time.perf_counter() - t0
-    lu = getattr(getattr(P, "factor", None), "lu", None)
-    row["lu_nnz"] = int(lu.L.nnz + lu.U.nnz) if lu is not None else None
-    row["rss_after_factor_bytes"] = _rss_bytes()
-
+    if lam1 is None:  # no eigsh at all: σ of the order of the first non-zero eigenvalue of a unit-area surface
+        lam1 = 10.0
+    row["sigma"] = lam1
     mu = args.mu_factor * n
     energy = cmm_energy(W, a, mu, smoothing="f6", eps=1e-3, delta=1e-3, weighting="uniform")
+    vg = jax.jit(lambda X: jax.value_and_grad(energy)(X))
+    # two preconditioners: the library's (W + σA)⁻¹ (SuperLU, MMD_AT_PLUS_A, symmetric mode; skipped when the
+    # factorisation is predicted over budget) and the O(n) Jacobi diagonal diag(W + σA)⁻¹ (a 1-D array)
+    preconds, row["factor"] = {}, {}
+    pred = prior.get("factor")
+    if pred is not None and pred > args.factor_budget:
+        row["factor"]["superlu-mmd"] = {"seconds": None,
+                                        "skipped": f"predicted {pred:.0f} s > budget {args.factor_budget:.0f} s"}
+    else:
+        t0 = time.perf_counter()
+        preconds["superlu-mmd"] = stiefel.shifted_inverse(W, a, lam1)
+        lu = getattr(getattr(preconds["superlu-mmd"], "factor", None), "lu", None)
+        row["factor"]["superlu-mmd"] = {"seconds": time.perf_counter() - t0,
+                                        "lu_nnz": int(lu.L.nnz + lu.U.nnz) if lu is not None else None}
+    t0 = time.perf_counter()
+    preconds["superlu-colamd"], lu = colamd_preconditioner(W, a, lam1)
+    row["factor"]["superlu-colamd"] = {"seconds": time.perf_counter() - t0, "lu_nnz": int(lu.L.nnz + lu.U.nnz)}
+    print(json.dumps({"n": n, "factor": row["factor"]}), file=sys.stderr, flush=True)
+    preconds["jacobi"] = np.asarray(W.diagonal() + lam1 * a)
+    row["rss_after_factor_bytes"] = _rss_bytes()
+
     row["solver"] = {}
     for k in args.ks:
         manifold = stiefel.GeneralizedStiefel(a, k, retraction="cholesky")
@@ -159,33 +203,48 @@ def worker(args) -> dict:
         else:
             X0, start = np.asarray(manifold.random_point(jax.random.PRNGKey(0))), "random"
         X0 = manifold.project_to_manifold(jnp.asarray(X0))
-        res = stiefel.minimize(energy, manifold, X0, method="cg", preconditioner=P, gtol=0.0,
-                               max_iters=args.iters, check=False)
-        iters = int(res.iterations)
-        fevals = int(res.stats["n_fevals"])
-        solve_P = jax.jit(lambda Y: P.solve(Y))
-        apply_P = _timed(lambda: solve_P(X0))
-        vg = jax.jit(lambda X: jax.value_and_grad(energy)(X))
         fg = _timed(lambda X=X0: vg(X))
-        ms_it = 1e3 * res.wall_time / max(iters, 1)
-        per_it_P, per_it_F = 1e3 * apply_P, 1e3 * fg * (fevals / max(iters, 1))
-        srow = {"start": start, "iterations": iters, "status": res.status_name, "wall_seconds": res.wall_time,
-                "compile_seconds": res.compile_time, "ms_per_iteration": ms_it, "fevals": fevals,
-                "fevals_per_iteration": fevals / max(iters, 1), "ms_precond_apply": per_it_P,
-                "ms_value_and_grad": 1e3 * fg, "ms_fevals_per_iteration": per_it_F,
-                "ms_rest_per_iteration": ms_it - per_it_P - per_it_F,
-                "block_bytes": n * k * 8}
-        del res
-        if n <= args.total_max_n:
-            tot = stiefel.minimize(energy, manifold, X0, method="cg", preconditioner=P, gtol=1e-4, ftol=1e-5,
-                                   max_iters=args.total_iters, check=False, monitor=energy.true_value)
-            h = tot.trimmed_history()
-            srow["total"] = {"seconds": tot.wall_time, "iterations": int(tot.iterations), "status": tot.status_name,
-                             "objective_start": float(h["monitor"][0]), "objective_final": float(h["monitor"][-1])}
-            del tot
-        row["solver"][str(k)] = srow
-        print(json.dumps({"n": n, "k": k, **{kk: v for kk, v in srow.items() if kk != "total"}}), file=sys.stderr,
-              flush=True)
+        for pname, P in preconds.items():
+            Pop = P if callable(P) else stiefel.as_operator(P, check=False)
+            solve_P = jax.jit(lambda Y, Pop=Pop: Pop(Y) if callable(Pop) else Pop.solve(Y))
+            direct = pname.startswith("superlu")
+            iters = args.iters
+            if direct:  # one column first: skip runs predicted far over budget (≈ 3.5 evaluations per iteration)
+                X1 = X0[:, :1]
+                guess = k * _timed(lambda: solve_P(X1), repeats=1)
+                if args.min_iters * (guess + 3.5 * fg) > 2 * args.solve_budget:
+                    row["solver"][f"{pname}_{k}"] = {"preconditioner": pname, "skipped":
+                                                     f"{args.min_iters} iterations predicted "
+                                                     f"{args.min_iters * (guess + 3.5 * fg):.0f} s",
+                                                     "ms_precond_apply": 1e3 * guess}
+                    continue
+            apply_P = _timed(lambda: solve_P(X0), repeats=1 if direct else 3)
+            if direct:
+                iters = int(min(args.iters, max(args.min_iters, args.solve_budget // (apply_P + 3.5 * fg))))
+            res = stiefel.minimize(energy, manifold, X0, method="cg", preconditioner=Pop, gtol=0.0,
+                                   max_iters=iters, check=False)
+            it = int(res.iterations)
+            fevals = int(res.stats["n_fevals"])
+            ms_it = 1e3 * res.wall_time / max(it, 1)
+            per_it_P, per_it_F = 1e3 * apply_P, 1e3 * fg * (fevals / max(it, 1))
+            srow = {"preconditioner": pname, "start": start, "iterations": it, "status": res.status_name,
+                    "wall_seconds": res.wall_time, "compile_seconds": res.compile_time, "ms_per_iteration": ms_it,
+                    "fevals": fevals, "fevals_per_iteration": fevals / max(it, 1), "ms_precond_apply": per_it_P,
+                    "ms_value_and_grad": 1e3 * fg, "ms_fevals_per_iteration": per_it_F,
+                    "ms_rest_per_iteration": ms_it - per_it_P - per_it_F, "block_bytes": n * k * 8,
+                    "objective_after": float(energy.true_value(res.x))}
+            del res
+            if pname == "superlu-mmd" and n <= args.total_max_n and k in args.total_ks:
+                tot = stiefel.minimize(energy, manifold, X0, method="cg", preconditioner=Pop, gtol=1e-4, ftol=1e-5,
+                                       max_iters=args.total_iters, check=False, monitor=energy.true_value)
+                h = tot.trimmed_history()
+                srow["total"] = {"seconds": tot.wall_time, "iterations": int(tot.iterations),
+                                 "status": tot.status_name, "objective_start": float(h["monitor"][0]),
+                                 "objective_final": float(h["monitor"][-1])}
+                del tot
+            row["solver"][f"{pname}_{k}"] = srow
+            print(json.dumps({"n": n, "k": k, **{kk: v for kk, v in srow.items() if kk != "total"}}),
+                  file=sys.stderr, flush=True)
     row["peak_rss_bytes"] = _rss_bytes()
     return row
 
@@ -198,22 +257,29 @@ def fit_exponent(ns, ts) -> float | None:
     return float(np.polyfit(x, y, 1)[0])
 
 
+PRECONDS = ("superlu-mmd", "superlu-colamd", "jacobi")
+
+
 def exponents(rows, ks) -> dict:
     ns = [r["n"] for r in rows]
-    out = {"assembly": fit_exponent(ns, [r["assembly_seconds"] for r in rows]),
-           "load": fit_exponent(ns, [r["load_seconds"] for r in rows]),
-           "factorisation": fit_exponent(ns, [r["factor_seconds"] for r in rows]),
-           "lu_nnz": fit_exponent(ns, [r["lu_nnz"] for r in rows]),
-           "peak_rss": fit_exponent(ns, [r["peak_rss_bytes"] for r in rows])}
+    out = {"load": fit_exponent(ns, [r["load_seconds"] for r in rows]),
+           "assembly": fit_exponent(ns, [r["assembly_seconds"] for r in rows]),
+           "nnz(W)": fit_exponent(ns, [r["nnz_W"] for r in rows]),
+           "peak RSS": fit_exponent(ns, [r["peak_rss_bytes"] for r in rows])}
+    for pname in PRECONDS[:2]:
+        out[f"factorisation {pname}"] = fit_exponent(ns, [r["factor"][pname].get("seconds") for r in rows])
+        out[f"nnz(L+U) {pname}"] = fit_exponent(ns, [r["factor"][pname].get("lu_nnz") for r in rows])
     for k in ks:
-        s = str(k)
-        out[f"eigsh_k{k}"] = fit_exponent(ns, [r["eigsh"].get(s, {}).get("seconds") for r in rows])
-        sol = [r["solver"].get(s) for r in rows]
-        out[f"ms_per_iteration_k{k}"] = fit_exponent(ns, [x and x["ms_per_iteration"] for x in sol])
-        out[f"precond_apply_k{k}"] = fit_exponent(ns, [x and x["ms_precond_apply"] for x in sol])
-        out[f"value_and_grad_k{k}"] = fit_exponent(ns, [x and x["ms_value_and_grad"] for x in sol])
-        tot = [x["total"]["seconds"] if x and "total" in x else None for x in sol]
-        out[f"total_k{k}"] = fit_exponent(ns, tot)
+        out[f"eigsh k={k}"] = fit_exponent(ns, [r["eigsh"].get(str(k), {}).get("seconds") for r in rows])
+    for k in ks:
+        for pname in PRECONDS:
+            sol = [r["solver"].get(f"{pname}_{k}") or {} for r in rows]
+            out[f"ms/iteration {pname} k={k}"] = fit_exponent(ns, [x.get("ms_per_iteration") for x in sol])
+            out[f"P apply {pname} k={k}"] = fit_exponent(ns, [x.get("ms_precond_apply") for x in sol])
+        sol = [r["solver"].get(f"jacobi_{k}") or {} for r in rows]
+        out[f"value+grad k={k}"] = fit_exponent(ns, [x.get("ms_value_and_grad") for x in sol])
+        tot = [(r["solver"].get(f"superlu-mmd_{k}") or {}).get("total", {}).get("seconds") for r in rows]
+        out[f"total to tolerance superlu-mmd k={k}"] = fit_exponent(ns, tot)
     return out
 
 
@@ -225,62 +291,97 @@ def markdown(meta, rows, exps, ks) -> str:
     mib = 2.0**20
     out = ["# Scaling: CMM block solver, eigsh and assembly up to ~10⁶ vertices (generated by bench/scaling.py)", "",
            "## Recipe", "",
-           f"* date: {meta['date']}", f"* machine: {meta['machine']}", f"* versions: {meta['versions']}",
+           f"* date: {meta['date']}", f"* machine: {meta['machine']} (shared with other jobs: seconds are noisy)",
+           f"* versions: {meta['versions']}",
            f"* JAX backend: {meta['backend']} ({meta['device']}); no GPU in this session",
-           f"* OPENBLAS_NUM_THREADS={meta['openblas_threads']}",
-           f"* command: `{meta['command']}`",
+           f"* OPENBLAS_NUM_THREADS={meta['openblas_threads']}, float64",
+           f"* command: `{meta['command']}` (wall time {meta['total_seconds'] / 60:.1f} min)",
            f"* meshes: `{meta['base']}` midpoint-subdivided (levels {meta['levels']}), cached in `{meta['cache']}`",
-           f"* solver: Riemannian CG, Cholesky retraction, `(W + λ₁A)⁻¹` residual preconditioning (SuperLU, "
-           f"MMD_AT_PLUS_A, symmetric mode), Huber δ = 1e-3, μ = {meta['mu_factor']}·n, uniform weighting, "
-           f"eigenbasis start, {meta['iters']} iterations with gtol = 0 (timing); total: gtol 1e-4 / ftol 1e-5, "
-           f"≤ {meta['total_iters']} iterations, for n ≤ {meta['total_max_n']:.0f}",
-           "* each size ran in its own subprocess; peak RSS is that process's `ru_maxrss` (includes the "
-           "Python/JAX runtime, ~0.3–0.5 GiB)", "",
+           f"* solver: Riemannian CG, Cholesky retraction, residual preconditioning, Huber δ = 1e-3, "
+           f"μ = {meta['mu_factor']}·n, uniform weighting, eigenbasis start; {meta['iters']} iterations with "
+           "gtol = 0 (fewer, at least 3, where a direct-solver run would exceed its time budget)",
+           "* preconditioners: `superlu-mmd` = the library's `stiefel.shifted_inverse(W, A, λ₁)` (SuperLU, "
+           "MMD on AᵀA + A, symmetric mode; skipped where its factorisation is predicted over budget); "
+           "`superlu-colamd` = the same SuperLU factorisation with the COLAMD ordering (bench-side, "
+           "`colamd_preconditioner`); `jacobi` = `diag(W + λ₁A)⁻¹`, O(n) (a 1-D array passed as `preconditioner=`)",
+           f"* total: `superlu-mmd`, gtol 1e-4 / ftol 1e-5, ≤ {meta['total_iters']} iterations, k ∈ "
+           f"{meta['total_ks']}, n ≤ {meta['total_max_n']:.0f}",
+           "* each size ran in its own subprocess; peak RSS is that process's `ru_maxrss` (it includes the "
+           "Python/JAX runtime, ~0.3 GiB)", "",
            "## Setup per size", "",
-           "| n | faces | nnz(W) | load s | assembly s | factor (W+λ₁A) s | nnz(L+U) | fill nnz(L+U)/nnz(W) "
-           "| " + " | ".join(f"eigsh k={k} s" for k in ks) + " | peak RSS MiB |",
-           "|---:|---:|---:|---:|---:|---:|---:|---:|" + "---:|" * len(ks) + "---:|"]
+           "| n | faces | nnz(W) | load s | assembly s | " + " | ".join(f"eigsh k={k} s" for k in ks)
+           + " | factor mmd s | nnz(L+U) mmd | factor colamd s | nnz(L+U) colamd | fill colamd |",
+           "|---:|---:|---:|---:|---:|" + "---:|" * len(ks) + "---:|---:|---:|---:|---:|"]
     for r in rows:
         eigs = []
         for k in ks:
             e = r["eigsh"].get(str(k), {})
             eigs.append(_fmt(e.get("seconds")) if e.get("seconds") is not None else f"skipped ({e.get('skipped', '')})")
-        fill = r["lu_nnz"] / r["nnz_W"] if r["lu_nnz"] else None
+        fm, fc = r["factor"]["superlu-mmd"], r["factor"]["superlu-colamd"]
+        fm_s = _fmt(fm.get("seconds")) if fm.get("seconds") is not None else f"skipped ({fm.get('skipped')})"
         out.append(f"| {r['n']} | {r['n_faces']} | {r['nnz_W']} | {r['load_seconds']:.2f} | {r['assembly_seconds']:.2f} | "
-                   f"{r['factor_seconds']:.2f} | {_fmt(r['lu_nnz'], '{:d}')} | {_fmt(fill, '{:.1f}')} | "
-                   + " | ".join(eigs) + f" | {r['peak_rss_bytes'] / mib:.0f} |")
+                   + " | ".join(eigs) + f" | {fm_s} | {_fmt(fm.get('lu_nnz'), '{:d}')} | {fc['seconds']:.2f} | "
+                   f"{fc['lu_nnz']} | {fc['lu_nnz'] / r['nnz_W']:.1f} |")
     out += ["", "## Block solver per iteration", "",
-            "ms/it: wall time of the fixed-length run ÷ iterations (compile apart). Split: one preconditioner "
-            "application `P·Y` (Y: n×k), objective+gradient evaluations (ms per evaluation × evaluations per "
-            "iteration, line-search trials included), rest (retraction, projections, CG bookkeeping; "
-            "can be negative where the separately timed parts overlap).", "",
-            "| n | k | ms/it | P apply ms | value+grad ms × evals/it | rest ms | compile s | n·k·8 MiB "
-            "| total: s (it., status, objective start → end) |",
-            "|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
+            "ms/it: wall time of the fixed-length run ÷ iterations (compilation apart). Split: one preconditioner "
+            "application `P·Y` (Y: n×k, timed apart), objective+gradient evaluations (ms per evaluation × "
+            "evaluations per iteration, line-search trials included), rest (retraction, projections, CG "
+            "bookkeeping; negative where the separately timed parts overlap or the machine's load changed).", "",
+            "| n | k | preconditioner | iterations | ms/it | P apply ms | value+grad ms × evals/it | rest ms | "
+            "compile s | n·k·8 MiB | total: s (it., status, objective start → end) |",
+            "|---:|---:|---|---:|---:|---:|---|---:|---:|---:|---|"]
     for r in rows:
         for k in ks:
-            s = r["solver"].get(str(k))
-            if not s:
-                continue
-            t = s.get("total")
-            tot = (f"{t['seconds']:.1f} ({t['iterations']}, {t['status']}, {t['objective_start']:.2f} → "
-                   f"{t['objective_final']:.2f})") if t else "– (not run at this size)"
-            out.append(f"| {r['n']} | {k} | {s['ms_per_iteration']:.1f} | {s['ms_precond_apply']:.1f} | "
-                       f"{s['ms_value_and_grad']:.1f} × {s['fevals_per_iteration']:.2f} | "
-                       f"{s['ms_rest_per_iteration']:.1f} | {s['compile_seconds']:.1f} | "
-                       f"{s['block_bytes'] / mib:.1f} | {tot} |")
+            for pname in PRECONDS:
+                s = r["solver"].get(f"{pname}_{k}")
+                if not s:
+                    continue
+                if "skipped" in s:
+                    out.append(f"| {r['n']} | {k} | {pname} | – | skipped ({s['skipped']}) | "
+                               f"{s['ms_precond_apply']:.0f} | – | – | – | {r['n'] * k * 8 / mib:.1f} | – |")
+                    continue
+                t = s.get("total")
+                tot = (f"{t['seconds']:.1f} ({t['iterations']}, {t['status']}, {t['objective_start']:.2f} → "
+                       f"{t['objective_final']:.2f})") if t else "–"
+                out.append(f"| {r['n']} | {k} | {pname} | {s['iterations']} | {s['ms_per_iteration']:.1f} | "
+                           f"{s['ms_precond_apply']:.1f} | {s['ms_value_and_grad']:.1f} × {s['fevals_per_iteration']:.2f} | "
+                           f"{s['ms_rest_per_iteration']:.1f} | {s['compile_seconds']:.1f} | "
+                           f"{s['block_bytes'] / mib:.1f} | {tot} |")
     out += ["", "## Memory", "",
-            "| n | peak RSS MiB | n·10·8 MiB | n·50·8 MiB | nnz(W)·12 B MiB | nnz(L+U)·12 B MiB | RSS after assembly / eigsh / factor MiB |",
+            "| n | peak RSS MiB | n·10·8 MiB | n·50·8 MiB | nnz(W)·12 B MiB | nnz(L+U) colamd ·12 B MiB | "
+            "RSS after assembly / eigsh / factorisations MiB |",
             "|---:|---:|---:|---:|---:|---:|---|"]
     for r in rows:
-        lu = r["lu_nnz"] or 0
+        lu = r["factor"]["superlu-colamd"]["lu_nnz"]
         out.append(f"| {r['n']} | {r['peak_rss_bytes'] / mib:.0f} | {r['n'] * 80 / mib:.1f} | {r['n'] * 400 / mib:.1f} | "
                    f"{r['nnz_W'] * 12 / mib:.1f} | {lu * 12 / mib:.1f} | {r['rss_after_assembly_bytes'] / mib:.0f} / "
                    f"{r['rss_after_eigsh_bytes'] / mib:.0f} / {r['rss_after_factor_bytes'] / mib:.0f} |")
-    out += ["", "## Fitted exponents p in t ∝ n^p (least squares in log–log over the sizes above)", "",
-            "| quantity | p |", "|---|---:|"]
-    out += [f"| {name} | {_fmt(p)} |" for name, p in exps.items()]
+    out += ["", "## Fitted exponents p in t ∝ n^p (least squares in log–log over the sizes where measured)", "",
+            "| quantity | p | sizes |", "|---|---:|---:|"]
+    for name, pexp in exps.items():
+        out.append(f"| {name} | {_fmt(pexp)} | {_count(rows, name)} |")
     return "\n".join(out) + "\n"
+
+
+def _count(rows, name) -> int:
+    """How many sizes entered the fit called ``name`` (for the table)."""
+    return sum(1 for r in rows if _value(r, name) not in (None, 0))
+
+
+def _value(r, name):
+    if name.startswith("factorisation ") or name.startswith("nnz(L+U) "):
+        f = r["factor"][name.split(" ", 1)[1]]
+        return f.get("seconds") if name.startswith("factorisation") else f.get("lu_nnz")
+    if name.startswith("eigsh k="):
+        return r["eigsh"].get(name.split("=")[1], {}).get("seconds")
+    if name.startswith("ms/iteration ") or name.startswith("P apply "):
+        pname, k = name.rsplit(" ", 2)[-2], name.rsplit("=", 1)[1]
+        return (r["solver"].get(f"{pname}_{k}") or {}).get("ms_per_iteration")
+    if name.startswith("value+grad"):
+        return (r["solver"].get(f"jacobi_{name.rsplit('=', 1)[1]}") or {}).get("ms_value_and_grad")
+    if name.startswith("total"):
+        return ((r["solver"].get(f"superlu-mmd_{name.rsplit('=', 1)[1]}") or {}).get("total") or {}).get("seconds")
+    return 1
 
 
 def main(argv=None):
@@ -289,10 +390,15 @@ def main(argv=None):
     p.add_argument("--levels", type=int, nargs="+", default=[1, 2, 3, 4])
     p.add_argument("--ks", type=int, nargs="+", default=[10, 50])
     p.add_argument("--iters", type=int, default=20, help="fixed iterations for the per-iteration timing")
-    p.add_argument("--total-max-n", type=float, default=3e5, help="run to tolerance only up to this n")
-    p.add_argument("--total-iters", type=int, default=300)
+    p.add_argument("--min-iters", type=int, default=3, help="at least this many (SuperLU runs over budget)")
+    p.add_argument("--solve-budget", type=float, default=60.0, help="seconds per SuperLU-preconditioned run")
+    p.add_argument("--factor-budget", type=float, default=120.0, help="skip the SuperLU factorisation when "
+                   "predicted above (s)")
+    p.add_argument("--total-ks", type=int, nargs="+", default=[10])
+    p.add_argument("--total-max-n", type=float, default=6e4, help="run to tolerance only up to this n")
+    p.add_argument("--total-iters", type=int, default=150)
     p.add_argument("--mu-factor", type=float, default=0.01)
-    p.add_argument("--eigsh-budget", type=float, default=300.0, help="skip eigsh when predicted above (s)")
+    p.add_argument("--eigsh-budget", type=float, default=240.0, help="skip eigsh when predicted above (s)")
     p.add_argument("--cache", default=str(default_cache()))
     p.add_argument("--out-json", default=str(HERE / "results_scaling.json"))
     p.add_argument("--out-md", default=str(HERE / "RESULTS_scaling.md"))
@@ -304,11 +410,14 @@ def main(argv=None):
         return 0
 
     rows, prior = [], {}
+    prev_n, prev_factor = None, None
     t_start = time.perf_counter()
     for level in args.levels:
         cmd = [sys.executable, "-m", "bench.scaling", "--worker", str(level), "--base", args.base,
                "--ks", *map(str, args.ks), "--iters", str(args.iters), "--total-max-n", str(args.total_max_n),
                "--total-iters", str(args.total_iters), "--mu-factor", str(args.mu_factor),
+               "--min-iters", str(args.min_iters), "--solve-budget", str(args.solve_budget),
+               "--factor-budget", str(args.factor_budget), "--total-ks", *map(str, args.total_ks),
                "--eigsh-budget", str(args.eigsh_budget), "--cache", args.cache, "--prior", json.dumps(prior)]
         proc = subprocess.run(cmd, cwd=ROOT, stdout=subprocess.PIPE, text=True)
         line = [ln for ln in proc.stdout.splitlines() if ln.startswith("ROW ")]
@@ -319,8 +428,20 @@ def main(argv=None):
         rows.append(row)
         print(json.dumps({"n": row["n"], "done_after_s": time.perf_counter() - t_start}), flush=True)
         # predict the next size's eigsh time (×4 vertices, exponent 1.5)
+        grow = row["n"] / max(prev_n, 1) if prev_n else 4.0
         for k, e in row["eigsh"].items():
             prior[int(k)] = e["seconds"] * 4.0**1.5 if e.get("seconds") else float("inf")
+        # factorisation: measured exponent between the last two sizes (at least 1.5)
+        t_f = row["factor"]["superlu-mmd"].get("seconds")
+        if t_f:
+            p_f = 2.0
+            if prev_factor:
+                p_f = max(p_f, float(np.log(t_f / prev_factor) / np.log(grow)))
+            prior["factor"] = t_f * grow**p_f
+            prev_factor = t_f
+        else:
+            prior["factor"] = float("inf")
+        prev_n = row["n"]
     exps = exponents(rows, args.ks)
     dev = jax.devices()[0]
     meta = {"date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
@@ -332,7 +453,7 @@ def main(argv=None):
             "command": "python -m bench.scaling " + " ".join(argv if argv is not None else sys.argv[1:]),
             "base": args.base, "levels": args.levels, "cache": args.cache, "mu_factor": args.mu_factor,
             "iters": args.iters, "total_iters": args.total_iters, "total_max_n": args.total_max_n,
-            "ks": args.ks, "total_seconds": time.perf_counter() - t_start}
+            "ks": args.ks, "total_ks": args.total_ks, "total_seconds": time.perf_counter() - t_start}
     Path(args.out_json).write_text(json.dumps({"meta": meta, "rows": rows, "exponents": exps}, indent=1))
     md = markdown(meta, rows, exps, args.ks)
     Path(args.out_md).write_text(md)
