@@ -92,12 +92,15 @@ def _rss_bytes() -> int:
 
 
 def _timed(fn, repeats=3):
-    fn()  # warm-up (compilation)
+    """Median seconds of ``fn()`` after a warm-up call; one timed call when it takes over a second."""
+    jax.block_until_ready(fn())  # warm-up (compilation)
     ts = []
     for _ in range(repeats):
         t0 = time.perf_counter()
         jax.block_until_ready(fn())
         ts.append(time.perf_counter() - t0)
+        if ts[-1] > 1.0:
+            break
     return float(np.median(ts))
 
 
@@ -138,7 +141,7 @@ def worker(args) -> dict:
     from objectives.energies import cmm_energy
 
     V, F, cached = subdivided(args.base, args.worker, Path(args.cache))
-    row: dict = {"level": args.worker, "mesh_cached": cached}
+    row: dict = {"level": args.worker, "base": args.base, "mesh_cached": cached}
     t0 = time.perf_counter()
     m = mesh.load((V, F), warn=False)
     row["load_seconds"] = time.perf_counter() - t0
@@ -180,8 +183,9 @@ def worker(args) -> dict:
     preconds, row["factor"] = {}, {}
     pred = prior.get("factor")
     if pred is not None and pred > args.factor_budget:
-        row["factor"]["superlu-mmd"] = {"seconds": None,
-                                        "skipped": f"predicted {pred:.0f} s > budget {args.factor_budget:.0f} s"}
+        why = (f"predicted {pred:.0f} s > budget {args.factor_budget:.0f} s" if np.isfinite(pred)
+               else "already over budget at a smaller size")
+        row["factor"]["superlu-mmd"] = {"seconds": None, "skipped": why}
     else:
         t0 = time.perf_counter()
         preconds["superlu-mmd"] = stiefel.shifted_inverse(W, a, lam1)
@@ -219,8 +223,8 @@ def worker(args) -> dict:
                                                      "ms_precond_apply": 1e3 * guess}
                     continue
             apply_P = _timed(lambda: solve_P(X0), repeats=1 if direct else 3)
-            if direct:
-                iters = int(min(args.iters, max(args.min_iters, args.solve_budget // (apply_P + 3.5 * fg))))
+            # every run within its budget: ≈ 3.5 evaluations per iteration, at least min_iters iterations
+            iters = int(min(args.iters, max(args.min_iters, args.solve_budget // (apply_P + 3.5 * fg))))
             res = stiefel.minimize(energy, manifold, X0, method="cg", preconditioner=Pop, gtol=0.0,
                                    max_iters=iters, check=False)
             it = int(res.iterations)
@@ -295,7 +299,9 @@ def markdown(meta, rows, exps, ks) -> str:
            f"* versions: {meta['versions']}",
            f"* JAX backend: {meta['backend']} ({meta['device']}); no GPU in this session",
            f"* OPENBLAS_NUM_THREADS={meta['openblas_threads']}, float64",
-           f"* command: `{meta['command']}` (wall time {meta['total_seconds'] / 60:.1f} min)",
+           f"* command: `{meta['command']}` (wall time {meta['total_seconds'] / 60:.1f} min"
+           + (f"; levels {meta['resumed_levels']} reused from the earlier run named by --resume)"
+              if meta.get("resumed_levels") else ")"),
            f"* meshes: `{meta['base']}` midpoint-subdivided (levels {meta['levels']}), cached in `{meta['cache']}`",
            f"* solver: Riemannian CG, Cholesky retraction, residual preconditioning, Huber δ = 1e-3, "
            f"μ = {meta['mu_factor']}·n, uniform weighting, eigenbasis start; {meta['iters']} iterations with "
@@ -384,6 +390,23 @@ def _value(r, name):
     return 1
 
 
+def _predict(row, prior, rows):
+    """Predicted eigsh and library-factorisation seconds at the next size (≈ ×4 vertices), into ``prior``."""
+    prev = rows[-2] if len(rows) >= 2 else None
+    grow = row["n"] / prev["n"] if prev else 4.0
+    for k, e in row["eigsh"].items():
+        prior[int(k)] = e["seconds"] * grow**1.5 if e.get("seconds") else float("inf")
+    t_f = row["factor"]["superlu-mmd"].get("seconds")
+    if not t_f:
+        prior["factor"] = float("inf")
+        return
+    p_f = 2.0  # measured exponent between the last two sizes, at least 2
+    t_prev = prev and prev["factor"]["superlu-mmd"].get("seconds")
+    if t_prev:
+        p_f = max(p_f, float(np.log(t_f / t_prev) / np.log(grow)))
+    prior["factor"] = t_f * grow**p_f
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--base", default="bunny.off", help="a mesh in ../shared/meshes or a path")
@@ -402,6 +425,7 @@ def main(argv=None):
     p.add_argument("--cache", default=str(default_cache()))
     p.add_argument("--out-json", default=str(HERE / "results_scaling.json"))
     p.add_argument("--out-md", default=str(HERE / "RESULTS_scaling.md"))
+    p.add_argument("--resume", default=None, help="reuse the rows of these levels from an earlier results JSON")
     p.add_argument("--worker", type=int, default=None, help=argparse.SUPPRESS)
     p.add_argument("--prior", default=None, help=argparse.SUPPRESS)
     args = p.parse_args(argv)
@@ -410,9 +434,17 @@ def main(argv=None):
         return 0
 
     rows, prior = [], {}
-    prev_n, prev_factor = None, None
     t_start = time.perf_counter()
+    done = {}
+    if args.resume:
+        done = {r["level"]: r for r in json.loads(Path(args.resume).read_text())["rows"]
+                if r.get("base", args.base) == args.base}
     for level in args.levels:
+        if level in done:  # measured by an earlier run (--resume): keep its row
+            rows.append(done[level])
+            row = done[level]
+            _predict(row, prior, rows)
+            continue
         cmd = [sys.executable, "-m", "bench.scaling", "--worker", str(level), "--base", args.base,
                "--ks", *map(str, args.ks), "--iters", str(args.iters), "--total-max-n", str(args.total_max_n),
                "--total-iters", str(args.total_iters), "--mu-factor", str(args.mu_factor),
@@ -428,20 +460,7 @@ def main(argv=None):
         rows.append(row)
         print(json.dumps({"n": row["n"], "done_after_s": time.perf_counter() - t_start}), flush=True)
         # predict the next size's eigsh time (×4 vertices, exponent 1.5)
-        grow = row["n"] / max(prev_n, 1) if prev_n else 4.0
-        for k, e in row["eigsh"].items():
-            prior[int(k)] = e["seconds"] * 4.0**1.5 if e.get("seconds") else float("inf")
-        # factorisation: measured exponent between the last two sizes (at least 1.5)
-        t_f = row["factor"]["superlu-mmd"].get("seconds")
-        if t_f:
-            p_f = 2.0
-            if prev_factor:
-                p_f = max(p_f, float(np.log(t_f / prev_factor) / np.log(grow)))
-            prior["factor"] = t_f * grow**p_f
-            prev_factor = t_f
-        else:
-            prior["factor"] = float("inf")
-        prev_n = row["n"]
+        _predict(row, prior, rows)
     exps = exponents(rows, args.ks)
     dev = jax.devices()[0]
     meta = {"date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
@@ -450,10 +469,10 @@ def main(argv=None):
                         f"jax {jax.__version__}",
             "backend": jax.default_backend(), "device": getattr(dev, "device_kind", str(dev)),
             "openblas_threads": os.environ.get("OPENBLAS_NUM_THREADS"),
-            "command": "python -m bench.scaling " + " ".join(argv if argv is not None else sys.argv[1:]),
+            "command": "python -m bench scaling " + " ".join(argv if argv is not None else sys.argv[1:]),
             "base": args.base, "levels": args.levels, "cache": args.cache, "mu_factor": args.mu_factor,
             "iters": args.iters, "total_iters": args.total_iters, "total_max_n": args.total_max_n,
-            "ks": args.ks, "total_ks": args.total_ks, "total_seconds": time.perf_counter() - t_start}
+            "ks": args.ks, "total_ks": args.total_ks, "resumed_levels": sorted(done), "total_seconds": time.perf_counter() - t_start}
     Path(args.out_json).write_text(json.dumps({"meta": meta, "rows": rows, "exponents": exps}, indent=1))
     md = markdown(meta, rows, exps, args.ks)
     Path(args.out_md).write_text(md)
