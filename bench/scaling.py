@@ -289,30 +289,29 @@ PRECONDS = ("superlu-mmd", "superlu-colamd", "jacobi")
 
 def exponents(rows, ks, last: int | None = None) -> dict:
     ns = [r["n"] for r in rows]
-    fit_all = fit_exponent
 
-    def fit_exponent(ns, ts):  # noqa: F811 — the same fit, over the last sizes if asked
-        return fit_all(ns, ts, last)
+    def fit(ns, ts):  # over the ``last`` largest sizes if asked
+        return fit_exponent(ns, ts, last)
 
-    out = {"load": fit_exponent(ns, [r["load_seconds"] for r in rows]),
-           "assembly": fit_exponent(ns, [r["assembly_seconds"] for r in rows]),
-           "nnz(W)": fit_exponent(ns, [r["nnz_W"] for r in rows]),
-           "peak RSS": fit_exponent(ns, [r["peak_rss_bytes"] for r in rows])}
+    out = {"load": fit(ns, [r["load_seconds"] for r in rows]),
+           "assembly": fit(ns, [r["assembly_seconds"] for r in rows]),
+           "nnz(W)": fit(ns, [r["nnz_W"] for r in rows]),
+           "peak RSS": fit(ns, [r["peak_rss_bytes"] for r in rows])}
     for pname in PRECONDS[:2]:
-        out[f"factorisation {pname}"] = fit_exponent(ns, [r["factor"][pname].get("seconds") for r in rows])
-        out[f"nnz(L+U) {pname}"] = fit_exponent(ns, [r["factor"][pname].get("lu_nnz") for r in rows])
+        out[f"factorisation {pname}"] = fit(ns, [r["factor"][pname].get("seconds") for r in rows])
+        out[f"nnz(L+U) {pname}"] = fit(ns, [r["factor"][pname].get("lu_nnz") for r in rows])
     for k in ks:
-        out[f"eigsh k={k}"] = fit_exponent(ns, [r["eigsh"].get(str(k), {}).get("seconds") for r in rows])
+        out[f"eigsh k={k}"] = fit(ns, [r["eigsh"].get(str(k), {}).get("seconds") for r in rows])
     for k in ks:
         for pname in PRECONDS:
             sol = [r["solver"].get(f"{pname}_{k}") or {} for r in rows]
             sol = [{} if "skipped" in x else x for x in sol]  # estimates of skipped runs stay out of the fits
-            out[f"ms/iteration {pname} k={k}"] = fit_exponent(ns, [x.get("ms_per_iteration") for x in sol])
-            out[f"P apply {pname} k={k}"] = fit_exponent(ns, [x.get("ms_precond_apply") for x in sol])
+            out[f"ms/iteration {pname} k={k}"] = fit(ns, [x.get("ms_per_iteration") for x in sol])
+            out[f"P apply {pname} k={k}"] = fit(ns, [x.get("ms_precond_apply") for x in sol])
         sol = [r["solver"].get(f"jacobi_{k}") or {} for r in rows]
-        out[f"value+grad k={k}"] = fit_exponent(ns, [x.get("ms_value_and_grad") for x in sol])
+        out[f"value+grad k={k}"] = fit(ns, [x.get("ms_value_and_grad") for x in sol])
         tot = [(r["solver"].get(f"superlu-mmd_{k}") or {}).get("total", {}).get("seconds") for r in rows]
-        out[f"total to tolerance superlu-mmd k={k}"] = fit_exponent(ns, tot)
+        out[f"total to tolerance superlu-mmd k={k}"] = fit(ns, tot)
     return out
 
 
