@@ -17,9 +17,10 @@ For each: median wall time over ``--repeats`` runs (JIT compilation apart, from 
 iterations, final true objective ``tr(ΨᵀWΨ) + μΣ w_i|Ψ_ij|`` (after exact A-orthonormalisation),
 orthogonality error ``max|ΨᵀAΨ − I|`` of the method's own output, the objective-vs-seconds curve
 (stored in the JSON), and the first time within 1e-3 (relative) of the target = the best objective
-over all μ > 0 methods. Memory: ``tracemalloc`` peak of Python/numpy allocations and the
-``ru_maxrss`` increase during one extra untimed run (JAX/XLA buffers are not seen by tracemalloc; on CPU
-they show in RSS), plus ``jax.devices()[0].memory_stats()`` where the backend has it (GPU).
+over all μ > 0 methods. Memory, in one extra untimed run: ``tracemalloc`` peak of Python/numpy
+allocations (JAX/XLA buffers are not seen by tracemalloc), the RSS high-water mark (reset through
+``/proc/self/clear_refs`` on Linux) over the RSS before the run (on CPU XLA buffers show here), the
+``ru_maxrss`` increase, plus ``jax.devices()[0].memory_stats()`` where the backend has it (GPU).
 
     python -m bench suite                                   # fandisk, k = 10, 3 repeats
     python -m bench suite --mesh bunny.off --repeats 1 --methods block-cg-cholesky admm eigsh
@@ -221,6 +222,28 @@ def _rss():
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024  # Linux: KiB
 
 
+def _status_bytes(field: str):
+    """``VmRSS``/``VmHWM`` of this process in bytes (Linux), else None."""
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith(field + ":"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        return None
+    return None
+
+
+def _reset_peak_rss() -> bool:
+    """Reset the kernel's RSS high-water mark (Linux ≥ 4.0: ``echo 5 > /proc/self/clear_refs``)."""
+    try:
+        with open("/proc/self/clear_refs", "w") as fh:
+            fh.write("5")
+        return True
+    except OSError:
+        return False
+
+
 def measure(fn, repeats: int, memory: bool = True) -> dict:
     """Run ``fn`` ``repeats`` times (median wall time; compile time from the first run), then once
     more under tracemalloc for memory (tracemalloc slows tracing down, so that run is not timed)."""
@@ -229,13 +252,17 @@ def measure(fn, repeats: int, memory: bool = True) -> dict:
     if memory:
         gc.collect()
         dev0, rss0 = _device_memory(), _rss()
+        reset = _reset_peak_rss()
+        cur0 = _status_bytes("VmRSS")
         tracemalloc.start()
         fn()
         _, peak = tracemalloc.get_traced_memory()
         tracemalloc.stop()
+        hwm = _status_bytes("VmHWM") if reset else None
         mem = {"tracemalloc_peak_bytes": int(peak), "maxrss_increase_bytes": int(_rss() - rss0),
-               "maxrss_after_bytes": int(_rss()), "device_memory_before": dev0,
-               "device_memory_after": _device_memory()}
+               "maxrss_after_bytes": int(_rss()), "rss_before_bytes": cur0,
+               "peak_rss_increase_bytes": (hwm - cur0) if (hwm is not None and cur0 is not None) else None,
+               "device_memory_before": dev0, "device_memory_after": _device_memory()}
     walls = [o["wall_time"] for o in runs]
     med = int(np.argsort(walls)[len(walls) // 2])
     row = dict(runs[med])
@@ -333,18 +360,22 @@ def markdown(meta, res, args) -> str:
            f"the μ > 0 methods = {_f(s['target_objective'], '{:.4f}')}; μ = 0 reference = eigsh's Σλ = "
            f"{_f(s['mu0_reference'], '{:.6f}')}; \"to target\" = first time within {REL:g} (relative)",
            "* memory: one extra, untimed run per method under tracemalloc (Python/numpy allocations; XLA "
-           "buffers are not seen); max-RSS increase is the growth of the process's high-water mark (0 when an earlier method "
+           "buffers are not seen); peak-RSS increase = the kernel's RSS high-water mark (reset before the run "
+           "through /proc/self/clear_refs) minus the RSS before it, i.e. everything the run touched, XLA "
+           "buffers included; max-RSS increase is the growth of the process's high-water mark (0 when an earlier method "
            "already used more)", "",
            "| method | μ | iterations | status | median s | to target s | compile s | final objective | rel. gap "
-           "| orthogonality | tracemalloc peak MiB | max-RSS increase MiB | device peak MiB |",
-           "|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+           "| orthogonality | tracemalloc peak MiB | peak-RSS increase MiB | max-RSS increase MiB | device peak MiB |",
+           "|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for mth, r in rows.items():
         dev = (r.get("device_memory_after") or {}).get("peak_bytes_in_use")
         label = mth + (f" (d = {r['d']})" if "d" in r else "")
         out.append(f"| {label} | {'0' if mth in MU0 else 'μ'} | {_f(r['iterations'], '{:d}')} | {r['status']} | "
                    f"{r['wall_time']:.2f} | {_f(r['time_to_target'])} | {r['compile_time']:.2f} | "
                    f"{r['objective']:.4f} | {_f(r['relative_gap'], '{:.1e}')} | {r['orthogonality']:.1e} | "
-                   f"{_f(r.get('tracemalloc_peak_bytes', 0) / mib, '{:.1f}')} | {_f(r.get('maxrss_increase_bytes', 0) / mib, '{:.1f}')} | "
+                   f"{_f(r.get('tracemalloc_peak_bytes', 0) / mib, '{:.1f}')} | "
+                   f"{_f(r.get('peak_rss_increase_bytes') and r['peak_rss_increase_bytes'] / mib, '{:.1f}')} | "
+                   f"{_f(r.get('maxrss_increase_bytes', 0) / mib, '{:.1f}')} | "
                    f"{_f(dev and dev / mib, '{:.1f}')} |")
     out += ["", "Objective-vs-seconds curves of every run are in `results_suite.json` (`rows.<method>.curve`; "
             "the block solvers' times are interpolated linearly over their iterations, the sequential solver "
