@@ -362,11 +362,10 @@ def markdown(meta, res, args) -> str:
            "* memory: one extra, untimed run per method under tracemalloc (Python/numpy allocations; XLA "
            "buffers are not seen); peak-RSS increase = the kernel's RSS high-water mark (reset before the run "
            "through /proc/self/clear_refs) minus the RSS before it, i.e. everything the run touched, XLA "
-           "buffers included; max-RSS increase is the growth of the process's high-water mark (0 when an earlier method "
-           "already used more)", "",
+           "buffers included (compilation happened in the first timed run, so its memory is not in it)", "",
            "| method | μ | iterations | status | median s | to target s | compile s | final objective | rel. gap "
-           "| orthogonality | tracemalloc peak MiB | peak-RSS increase MiB | max-RSS increase MiB | device peak MiB |",
-           "|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+           "| orthogonality | tracemalloc peak MiB | peak-RSS increase MiB | device peak MiB |",
+           "|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for mth, r in rows.items():
         dev = (r.get("device_memory_after") or {}).get("peak_bytes_in_use")
         label = mth + (f" (d = {r['d']})" if "d" in r else "")
@@ -375,7 +374,7 @@ def markdown(meta, res, args) -> str:
                    f"{r['objective']:.4f} | {_f(r['relative_gap'], '{:.1e}')} | {r['orthogonality']:.1e} | "
                    f"{_f(r.get('tracemalloc_peak_bytes', 0) / mib, '{:.1f}')} | "
                    f"{_f(r.get('peak_rss_increase_bytes') and r['peak_rss_increase_bytes'] / mib, '{:.1f}')} | "
-                   f"{_f(r.get('maxrss_increase_bytes', 0) / mib, '{:.1f}')} | "
+
                    f"{_f(dev and dev / mib, '{:.1f}')} |")
     out += ["", "Objective-vs-seconds curves of every run are in `results_suite.json` (`rows.<method>.curve`; "
             "the block solvers' times are interpolated linearly over their iterations, the sequential solver "
@@ -403,10 +402,16 @@ def main(argv=None):
     p.add_argument("--no-memory", action="store_true", help="skip the extra tracemalloc run per method")
     p.add_argument("--out-json", default=str(HERE / "results_suite.json"))
     p.add_argument("--out-md", default=str(HERE / "RESULTS_suite.md"))
+    p.add_argument("--render", default=None, help="only re-render --out-md from this results JSON")
     args = p.parse_args(argv)
+    if args.render:  # re-render the markdown from a results JSON
+        saved = json.loads(Path(args.render).read_text())
+        shown = argparse.Namespace(**saved["params"])
+        Path(args.out_md).write_text(markdown(saved["meta"], saved, shown))
+        return 0
     meta = metadata(argv)
     res = run_suite(args)
-    params = {k: v for k, v in vars(args).items() if k not in ("out_json", "out_md")}
+    params = {k: v for k, v in vars(args).items() if k not in ("out_json", "out_md", "render")}
     Path(args.out_json).write_text(json.dumps({"meta": meta, "params": params, **res}, indent=1, default=float))
     md = markdown(meta, res, args)
     Path(args.out_md).write_text(md)
