@@ -1,0 +1,71 @@
+"""The benchmark entry point ``python -m bench`` and a tiny run of the suite (issue 7)."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bench import __main__ as dispatcher
+
+ROOT = Path(__file__).resolve().parents[1]
+HAND = ROOT.parent / "shared" / "meshes" / "hand_868.obj"
+
+
+def test_list_names_every_benchmark():
+    out = subprocess.run([sys.executable, "-m", "bench", "--list"], cwd=ROOT, capture_output=True, text=True,
+                         timeout=60)
+    assert out.returncode == 0, out.stderr
+    names = [line.split()[0] for line in out.stdout.splitlines() if line.strip()]
+    assert names == list(dispatcher.BENCHMARKS)
+    for name in ("suite", "scaling", "stiefel", "mesh", "cmm", "bases"):  # present in this checkout
+        assert dispatcher.available(name)
+        assert "[not in this checkout]" not in next(line for line in out.stdout.splitlines()
+                                                    if line.startswith(name + " "))
+
+
+def test_missing_module_and_unknown_name_are_named(monkeypatch, capsys):
+    monkeypatch.setitem(dispatcher.BENCHMARKS, "ghost", ("bench.no_such_benchmark", "not written yet"))
+    assert dispatcher.main(["ghost", "--quick"]) == 2
+    err = capsys.readouterr().err
+    assert "bench.no_such_benchmark" in err and "not in this checkout" in err
+    assert "[not in this checkout]" in dispatcher.listing()
+    assert dispatcher.main(["no-such-name"]) == 2
+    assert "unknown benchmark 'no-such-name'" in capsys.readouterr().err
+
+
+@pytest.mark.skipif(not HAND.exists(), reason="shared meshes not available")
+def test_tiny_suite_writes_consistent_results(tmp_path):
+    out_json, out_md = tmp_path / "suite.json", tmp_path / "suite.md"
+    methods = ["block-cg-cholesky", "block-bb-cholesky", "admm", "fast", "eigsh", "block-cg-mu0"]
+    rc = dispatcher.main(["suite", "--mesh", str(HAND), "-k", "3", "--repeats", "1", "--max-iters", "25",
+                          "--admm-iters", "40", "--fast-samples", "40", "--methods", *methods,
+                          "--out-json", str(out_json), "--out-md", str(out_md)])
+    assert rc == 0
+    res = json.loads(out_json.read_text())
+    meta, setup, rows = res["meta"], res["setup"], res["rows"]
+    assert meta["jax_backend"] and meta["device"] and meta["versions"]["jax"]
+    assert meta["command"].startswith("python -m bench suite")
+    assert setup["n"] == 868 and setup["k"] == 3
+    assert list(rows) == methods
+    for name, r in rows.items():
+        assert np.isfinite(r["objective"]) and r["wall_time"] >= 0 and r["compile_time"] >= 0
+        assert r["orthogonality"] < 1e-8, name  # every method returns A-orthonormal modes
+        assert r["tracemalloc_peak_bytes"] > 0
+        t, f = np.asarray(r["curve"]["time"]), np.asarray(r["curve"]["objective"])
+        assert t.size == f.size >= 1 and np.all(np.diff(t) >= 0)
+    # the target is the best objective seen over the μ > 0 methods: nobody ends below it
+    target = setup["target_objective"]
+    for name in methods[:4]:
+        assert rows[name]["objective"] >= target * (1 - 1e-12)
+    # at μ = 0, Σλ (eigsh) is the minimum of tr(XᵀWX) over XᵀAX = I (Ky Fan): the solver cannot beat it
+    ref = rows["eigsh"]["objective"]
+    assert setup["mu0_reference"] == ref
+    assert rows["block-cg-mu0"]["objective"] >= ref * (1 - 1e-10)
+    assert rows["block-cg-mu0"]["objective"] <= ref * (1 + 1e-3)  # and gets close within 25 iterations
+    md = out_md.read_text()
+    assert "hand_868.obj" in md and "no GPU" in md or meta["gpu"]
+    for name in methods:
+        assert f"| {name}" in md
