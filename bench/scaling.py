@@ -190,20 +190,21 @@ def worker(args) -> dict:
     mu = args.mu_factor * n
     energy = cmm_energy(W, a, mu, smoothing="f6", eps=1e-3, delta=1e-3, weighting="uniform")
     vg = jax.jit(lambda X: jax.value_and_grad(energy)(X))
-    # two preconditioners: the library's (W + σA)⁻¹ (SuperLU, MMD_AT_PLUS_A, symmetric mode; skipped when the
+    # preconditioners: the library's (W + σA)⁻¹ (SymmetricFactor: QDLDL/AMD by default; skipped when the
     # factorisation is predicted over budget) and the O(n) Jacobi diagonal diag(W + σA)⁻¹ (a 1-D array)
     preconds, row["factor"] = {}, {}
     pred = prior.get("factor")
     if pred is not None and pred > args.factor_budget:
         why = (f"predicted {pred:.0f} s > budget {args.factor_budget:.0f} s" if np.isfinite(pred)
                else "already over budget at a smaller size")
-        row["factor"]["superlu-mmd"] = {"seconds": None, "skipped": why}
+        row["factor"]["library"] = {"seconds": None, "skipped": why}
     else:
         t0 = time.perf_counter()
-        preconds["superlu-mmd"] = stiefel.shifted_inverse(W, a, lam1)
-        lu = getattr(getattr(preconds["superlu-mmd"], "factor", None), "lu", None)
-        row["factor"]["superlu-mmd"] = {"seconds": time.perf_counter() - t0,
-                                        "lu_nnz": int(lu.L.nnz + lu.U.nnz) if lu is not None else None}
+        preconds["library"] = stiefel.shifted_inverse(W, a, lam1)
+        host = getattr(preconds["library"], "factor", None)  # the operator's SymmetricFactor
+        row["factor"]["library"] = {"seconds": time.perf_counter() - t0,
+                                        "lu_nnz": host.factor.nnz if host is not None else None,
+                                        "backend": host.factor.backend if host is not None else None}
     t0 = time.perf_counter()
     preconds["superlu-colamd"], lu = colamd_preconditioner(W, a, lam1)
     row["factor"]["superlu-colamd"] = {"seconds": time.perf_counter() - t0, "lu_nnz": int(lu.L.nnz + lu.U.nnz)}
@@ -231,7 +232,7 @@ def worker(args) -> dict:
         for pname, P in preconds.items():
             Pop = P if callable(P) else stiefel.as_operator(P, check=False)
             solve_P = jax.jit(lambda Y, Pop=Pop: Pop(Y) if callable(Pop) else Pop.solve(Y))
-            direct = pname.startswith("superlu")
+            direct = pname in ("library", "superlu-colamd")
             iters = args.iters
             if direct:  # one column first: skip runs predicted far over budget (≈ 3.5 evaluations per iteration)
                 X1 = X0[:, :1]
@@ -258,7 +259,7 @@ def worker(args) -> dict:
                     "ms_rest_per_iteration": ms_it - per_it_P - per_it_F, "block_bytes": n * k * 8,
                     "objective_after": float(energy.true_value(res.x))}
             del res
-            if pname == "superlu-mmd" and n <= args.total_max_n and k in args.total_ks:
+            if pname == "library" and n <= args.total_max_n and k in args.total_ks:
                 tot = stiefel.minimize(energy, manifold, X0, method="cg", preconditioner=Pop, gtol=1e-4, ftol=1e-5,
                                        max_iters=args.total_iters, check=False, monitor=energy.true_value)
                 h = tot.trimmed_history()
@@ -284,7 +285,7 @@ def fit_exponent(ns, ts, last: int | None = None) -> float | None:
     return float(np.polyfit(x, y, 1)[0])
 
 
-PRECONDS = ("superlu-mmd", "superlu-colamd", "jacobi")
+PRECONDS = ("library", "superlu-colamd", "jacobi")
 
 
 def exponents(rows, ks, last: int | None = None) -> dict:
@@ -310,8 +311,8 @@ def exponents(rows, ks, last: int | None = None) -> dict:
             out[f"P apply {pname} k={k}"] = fit(ns, [x.get("ms_precond_apply") for x in sol])
         sol = [r["solver"].get(f"jacobi_{k}") or {} for r in rows]
         out[f"value+grad k={k}"] = fit(ns, [x.get("ms_value_and_grad") for x in sol])
-        tot = [(r["solver"].get(f"superlu-mmd_{k}") or {}).get("total", {}).get("seconds") for r in rows]
-        out[f"total to tolerance superlu-mmd k={k}"] = fit(ns, tot)
+        tot = [(r["solver"].get(f"library_{k}") or {}).get("total", {}).get("seconds") for r in rows]
+        out[f"total to tolerance library k={k}"] = fit(ns, tot)
     return out
 
 
@@ -335,24 +336,25 @@ def markdown(meta, rows, exps, ks) -> str:
            f"* solver: Riemannian CG, Cholesky retraction, residual preconditioning, Huber δ = 1e-3, "
            f"μ = {meta['mu_factor']}·n, uniform weighting, eigenbasis start; {meta['iters']} iterations with "
            "gtol = 0 (fewer, at least 3, where a direct-solver run would exceed its time budget)",
-           "* preconditioners: `superlu-mmd` = the library's `stiefel.shifted_inverse(W, A, λ₁)` (SuperLU, "
-           "MMD on AᵀA + A, symmetric mode; skipped where its factorisation is predicted over budget); "
+           "* preconditioners: `library` = the library's `stiefel.shifted_inverse(W, A, λ₁)` "
+           "(`stiefel.sparse_factor.SymmetricFactor`: QDLDL with AMD ordering; skipped where its "
+           "factorisation is predicted over budget); "
            "`superlu-colamd` = the same SuperLU factorisation with the COLAMD ordering (bench-side, "
            "`colamd_preconditioner`); `jacobi` = `diag(W + λ₁A)⁻¹`, O(n) (a 1-D array passed as `preconditioner=`)",
-           f"* total: `superlu-mmd`, gtol 1e-4 / ftol 1e-5, ≤ {meta['total_iters']} iterations, k ∈ "
+           f"* total: `library`, gtol 1e-4 / ftol 1e-5, ≤ {meta['total_iters']} iterations, k ∈ "
            f"{meta['total_ks']}, n ≤ {meta['total_max_n']:.0f}",
            "* each size ran in its own subprocess; peak RSS is that process's `ru_maxrss` (it includes the "
            "Python/JAX runtime, ~0.3 GiB)", "",
            "## Setup per size", "",
            "| n | faces | nnz(W) | load s | assembly s | " + " | ".join(f"eigsh k={k} s" for k in ks)
-           + " | factor mmd s | nnz(L+U) mmd | factor colamd s | nnz(L+U) colamd | fill colamd |",
+           + " | factor library s | nnz(factor) library | factor colamd s | nnz(L+U) colamd | fill colamd |",
            "|---:|---:|---:|---:|---:|" + "---:|" * len(ks) + "---:|---:|---:|---:|---:|"]
     for r in rows:
         eigs = []
         for k in ks:
             e = r["eigsh"].get(str(k), {})
             eigs.append(_fmt(e.get("seconds")) if e.get("seconds") is not None else f"skipped ({e.get('skipped', '')})")
-        fm, fc = r["factor"]["superlu-mmd"], r["factor"]["superlu-colamd"]
+        fm, fc = r["factor"]["library"], r["factor"]["superlu-colamd"]
         fm_s = _fmt(fm.get("seconds")) if fm.get("seconds") is not None else f"skipped ({fm.get('skipped')})"
         out.append(f"| {r['n']} | {r['n_faces']} | {r['nnz_W']} | {r['load_seconds']:.2f} | {r['assembly_seconds']:.2f} | "
                    + " | ".join(eigs) + f" | {fm_s} | {_fmt(fm.get('lu_nnz'), '{:d}')} | {fc['seconds']:.2f} | "
@@ -416,7 +418,7 @@ def _value(r, name):
     if name.startswith("value+grad"):
         return (r["solver"].get(f"jacobi_{name.rsplit('=', 1)[1]}") or {}).get("ms_value_and_grad")
     if name.startswith("total"):
-        return ((r["solver"].get(f"superlu-mmd_{name.rsplit('=', 1)[1]}") or {}).get("total") or {}).get("seconds")
+        return ((r["solver"].get(f"library_{name.rsplit('=', 1)[1]}") or {}).get("total") or {}).get("seconds")
     return 1
 
 
@@ -426,12 +428,12 @@ def _predict(row, prior, rows):
     grow = row["n"] / prev["n"] if prev else 4.0
     for k, e in row["eigsh"].items():
         prior[int(k)] = e["seconds"] * grow**1.5 if e.get("seconds") else float("inf")
-    t_f = row["factor"]["superlu-mmd"].get("seconds")
+    t_f = row["factor"]["library"].get("seconds")
     if not t_f:
         prior["factor"] = float("inf")
         return
     p_f = 2.0  # measured exponent between the last two sizes, at least 2
-    t_prev = prev and prev["factor"]["superlu-mmd"].get("seconds")
+    t_prev = prev and prev["factor"]["library"].get("seconds")
     if t_prev:
         p_f = max(p_f, float(np.log(t_f / t_prev) / np.log(grow)))
     prior["factor"] = t_f * grow**p_f
