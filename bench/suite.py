@@ -60,6 +60,7 @@ import scipy  # noqa: E402
 
 import mesh  # noqa: E402
 import stiefel  # noqa: E402
+from stiefel.sparse_factor import default_backend  # noqa: E402
 from objectives.admm import ADMMOptions, orthonormalize  # noqa: E402
 from objectives.cmm import compressed_modes, first_eigenpairs  # noqa: E402
 from objectives.energies import cmm_energy  # noqa: E402
@@ -68,7 +69,7 @@ MESHES = ROOT.parent / "shared" / "meshes"
 HERE = Path(__file__).resolve().parent
 BLOCK = {"block-cg-cholesky": ("cg", "cholesky"), "block-cg-cayley": ("cg", "cayley"),
          "block-cg-polar": ("cg", "polar"), "block-bb-cholesky": ("bb", "cholesky")}
-METHODS = (*BLOCK, "sequential", "admm", "fast", "eigsh", "block-cg-mu0")
+METHODS = (*BLOCK, "block-cg-active-set", "sequential", "admm", "fast", "eigsh", "block-cg-mu0")
 MU0 = ("eigsh", "block-cg-mu0")
 REL = 1e-3
 
@@ -159,6 +160,14 @@ def run_block_mu0(pb: Problem) -> dict:
             "compile_time": res.compile_time, "objective": pb.true_objective(res.x, pb.energy0),
             "orthogonality": _orth(res.x, pb.a), "curve": (np.linspace(0.0, res.wall_time, it + 1), h["monitor"]),
             "fevals": int(res.stats["n_fevals"])}
+
+
+def run_block_active_set(pb: Problem) -> dict:
+    """Block CG / Cholesky with the active-set preconditioner (``objectives.active_set``), via ``compressed_modes``."""
+    res = compressed_modes((pb.W, pb.lap.A), pb.k, pb.mu, method="block", weighting="uniform", smoothing="f6",
+                           gtol=pb.args.gtol, ftol=pb.args.ftol, max_iters=pb.args.max_iters,
+                           preconditioner="active_set", preconditioner_shift=float(pb.evals[1]))
+    return _from_cmm(pb, res)
 
 
 def run_eigsh(pb: Problem) -> dict:
@@ -279,7 +288,8 @@ def run_suite(args) -> dict:
     n = m.n_vertices
     mu = args.mu_factor * n
     pb = Problem(m, args.k, mu, args)
-    runners = {**{b: (lambda b=b: run_block(pb, b)) for b in BLOCK}, "sequential": lambda: run_sequential(pb),
+    runners = {**{b: (lambda b=b: run_block(pb, b)) for b in BLOCK},
+               "block-cg-active-set": lambda: run_block_active_set(pb), "sequential": lambda: run_sequential(pb),
                "admm": lambda: run_admm(pb), "fast": lambda: run_fast(pb), "eigsh": lambda: run_eigsh(pb),
                "block-cg-mu0": lambda: run_block_mu0(pb)}
     rows = {}
@@ -350,7 +360,8 @@ def markdown(meta, res, args) -> str:
            f"{s['mu']:.2f}, uniform ℓ1 weighting, cotangent W, lumped A (unit area); start: first k eigenfunctions "
            "(fast: restricted eigenbasis; block CG at μ = 0: random)",
            f"* shared setup (not in the times below): eigenbasis {s['eigenbasis_seconds']:.2f} s, preconditioner "
-           f"`(W + λ₁A)` SuperLU factorisation {s['preconditioner_factor_seconds']:.2f} s (λ₁ = {s['lambda_1']:.4g}), "
+           f"`(W + λ₁A)` factorisation ({default_backend()}) {s['preconditioner_factor_seconds']:.2f} s "
+           f"(λ₁ = {s['lambda_1']:.4g}), "
            f"local functions {_f(s['local_functions_seconds'])} s",
            f"* manifold solvers: Huber δ = 1e-3, gtol {args.gtol}, ftol {args.ftol} (20-iteration window), at most "
            f"{args.max_iters} iterations (sequential: {args.seq_iters} per column); ADMM and fast: ρ₀ = "

@@ -16,7 +16,7 @@ different smoothings is run as a Python loop over one vmapped group per smoothin
 over the batch: the reference the vmapped batch is measured against
 (``bench/bench_batch.py``).
 
-Preconditioners: ``"shifted"`` applies ``(W + σA)⁻¹`` by SuperLU on the host
+Preconditioners: ``"shifted"`` applies ``(W + σA)⁻¹`` by the sparse LDLᵀ factorisation (``stiefel.sparse_factor``) on the host
 (``jax.pure_callback``; under vmap one host call per member, or with
 ``callback_vmap="expand_dims"`` one call for the whole batch), ``"jacobi"`` its diagonal
 (pure JAX), ``None`` none.
@@ -85,7 +85,7 @@ class CMMProblem(eqx.Module):
 
     energy: ``CMMEnergy`` (its μ, ε, δ are replaced per solve); manifold: ``XᵀAX = I`` with A
     diagonal, ``(n, k)`` points; precond: an operator whose ``solve`` applies the preconditioner
-    (``SparseOperator`` with SuperLU, ``DiagonalOperator``), or None.
+    (``SparseOperator`` with its host factorisation, ``DiagonalOperator``), or None.
     """
 
     energy: CMMEnergy
@@ -173,13 +173,13 @@ def cmm_batch(
       smoothing: a smoothing name, or a sequence of B names (one vmapped group per name).
       eps, delta: smoothing parameters, scalars or ``(B,)``.
       weighting: ``"area"`` or ``"uniform"`` ℓ1 weights.
-      preconditioner: ``"shifted"`` ((W + σA)⁻¹, SuperLU on the host), ``"jacobi"`` (its
+      preconditioner: ``"shifted"`` ((W + σA)⁻¹, sparse LDLᵀ on the host), ``"jacobi"`` (its
         diagonal, pure JAX) or None.
       sigma: σ; default λ₁.
       options: ``stiefel.BlockOptions`` (default ``default_options()``).
       mode: ``"vmap"`` (one vmapped program) or ``"loop"`` (the single-problem program,
         compiled once, called B times from Python).
-      callback_vmap: ``"sequential"`` or ``"expand_dims"``: how the SuperLU host callback is
+      callback_vmap: ``"sequential"`` or ``"expand_dims"``: how the sparse-solve host callback is
         batched under vmap (``SparseOperator.from_scipy``).
       dtype: float32 / float64 (default: float64 if x64 is enabled).
 
