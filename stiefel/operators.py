@@ -10,8 +10,9 @@ shape ``(n,)`` or ``(n, k)``. Three implementations:
   neighbour table ("ELL": ``(n, w)`` column indices and values, ``w`` the
   largest row length). ``mv`` is ``w`` fused gathers with no scatter, which on
   CPU beat BCOO and ``segment_sum`` (see ``bench/RESULTS.md``). ``solve``
-  uses one sparse factorisation computed on the host at construction
-  (``stiefel.sparse_factor.SymmetricFactor``: RCM + SuperLU, symmetric mode) and called through ``jax.pure_callback`` inside
+  uses one sparse LDLᵀ factorisation computed on the host at construction
+  (``stiefel.sparse_factor.SymmetricFactor``: QDLDL, or SuperLU in symmetric
+  mode) and called through ``jax.pure_callback`` inside
   ``lax.custom_linear_solve``, so it is jittable and differentiable. The
   matrix is never densified.
 

@@ -9,8 +9,8 @@ the ELL products' multiply-adds) runs on each device's rows; reductions over row
 traces, norms) become partial sums plus an all-reduce of ``k × k`` blocks; the ELL gathers
 ``X[cols]`` read neighbours' rows across shard boundaries, which XLA resolves by collectives.
 
-Preconditioners: a host callback (SuperLU, ``SparseOperator.solve`` / ``shifted_inverse``)
-cannot be partitioned — it would gather ``X`` onto one host. Use none, or a diagonal one such
+Preconditioners: a host callback (the sparse factorisation behind ``SparseOperator.solve`` /
+``shifted_inverse``) cannot be partitioned — it would gather ``X`` onto one host. Use none, or a diagonal one such
 as ``DiagonalOperator(diag(W) + σ·diag(M))`` (Jacobi), which shards by rows like ``M``.
 
 Multi-host: the same code runs on several hosts, one process per host. Call
