@@ -33,7 +33,7 @@ import scipy.sparse as sp
 
 from stiefel.sparse_factor import SymmetricFactor
 
-__all__ = ["ADMMOptions", "ADMMResult", "admm", "admm_sequential", "l1_weights_np", "RhoRule"]
+__all__ = ["ADMMOptions", "ADMMResult", "admm", "admm_sequential", "l1_weights_np", "RhoRule", "soft_threshold"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -164,6 +164,32 @@ class _EStep:
         return lu.solve(rhs)
 
 
+def soft_threshold(V: np.ndarray, t) -> np.ndarray:
+    """The prox of ``t·|·|`` elementwise (the S-step): ``sgn(V)·max(|V| − t, 0)``; ``t`` broadcasts."""
+    return np.sign(V) * np.maximum(np.abs(V) - t, 0.0)
+
+
+class _History:
+    """ADMM traces (objective, residuals, ρ, seconds since ``t0``), as numpy arrays at the end."""
+
+    KEYS = ("objective", "primal", "dual", "rho", "time")
+
+    def __init__(self, t0: float):
+        self.t0 = t0
+        self.data: dict = {key: [] for key in self.KEYS}
+
+    def record(self, **values) -> float:
+        """Append the given traces and the elapsed time; returns the elapsed time."""
+        for key, value in values.items():
+            self.data[key].append(value)
+        elapsed = time.perf_counter() - self.t0
+        self.data["time"].append(elapsed)
+        return elapsed
+
+    def arrays(self) -> dict:
+        return {key: np.asarray(v) for key, v in self.data.items()}
+
+
 def _polar(B):
     U, _, Vt = np.linalg.svd(B, full_matrices=False)
     return U @ Vt
@@ -200,10 +226,10 @@ def admm(W, area_diag, k: int, mu: float, *, weighting: str = "area", Psi0=None,
     estep = _EStep(W, d)
     thresh_w = w / d  # shrink S at μ w_i / (ρ d_i)
     sqrt_d = np.sqrt(d)[:, None]
-    hist = {key: [] for key in ("objective", "primal", "dual", "rho", "time")}
     status = "max_iters"
     rule = RhoRule(options)
     t0 = time.perf_counter()
+    hist = _History(t0)
     it = 0
     for it in range(1, options.max_iters + 1):
         Y = 0.5 * (E - UE + S - US)
@@ -214,8 +240,7 @@ def admm(W, area_diag, k: int, mu: float, *, weighting: str = "area", Psi0=None,
         E_old, S_old = E, S
         E = estep.solve(rho, rho * (d[:, None] * (Psi + UE)))
         V = Psi + US
-        t = mu * thresh_w[:, None] / rho
-        S = np.sign(V) * np.maximum(np.abs(V) - t, 0.0)
+        S = soft_threshold(V, mu * thresh_w[:, None] / rho)
         UE += Psi - E
         US += Psi - S
         # residuals in the penalty norm
@@ -223,11 +248,7 @@ def admm(W, area_diag, k: int, mu: float, *, weighting: str = "area", Psi0=None,
         dual = rho * np.sqrt(np.sum(d[:, None] * (E - E_old + S - S_old) ** 2))
         Psi_feasible = Psi if exact else orthonormalize(Psi, a)
         obj = _true_objective(W, w, mu, Psi_feasible)
-        hist["objective"].append(obj)
-        hist["primal"].append(primal)
-        hist["dual"].append(dual)
-        hist["rho"].append(rho)
-        hist["time"].append(time.perf_counter() - t0)
+        elapsed = hist.record(objective=obj, primal=primal, dual=dual, rho=rho)
         scale_p = np.sqrt(2 * n * k) * options.eps_abs
         eps_pri = scale_p + options.eps_rel * max(np.sqrt(np.sum(d[:, None] * Psi**2)) * np.sqrt(2),
                                                   np.sqrt(np.sum(d[:, None] * (E**2 + S**2))))
@@ -238,7 +259,7 @@ def admm(W, area_diag, k: int, mu: float, *, weighting: str = "area", Psi0=None,
         if target is not None and obj <= target:
             status = "target"
             break
-        if hist["time"][-1] > options.time_limit:
+        if elapsed > options.time_limit:
             status = "time_limit"
             break
         rho = rule.apply(it, primal, dual, rho, UE, US)
@@ -246,7 +267,7 @@ def admm(W, area_diag, k: int, mu: float, *, weighting: str = "area", Psi0=None,
     Psi_out = orthonormalize(Psi, a)
     return ADMMResult(
         Psi=Psi_out, objective=_true_objective(W, w, mu, Psi_out), iterations=it, status=status,
-        history={key: np.asarray(v) for key, v in hist.items()}, wall_time=wall,
+        history=hist.arrays(), wall_time=wall,
         factor_time=estep.factor_time, n_factorizations=estep.count,
     )
 
@@ -267,8 +288,8 @@ def admm_sequential(W, area_diag, k: int, mu: float, *, weighting: str = "area",
     rng = np.random.default_rng(seed)
     Phi = np.zeros((n, 0))
     estep = _EStep(W, a)
-    hist = {key: [] for key in ("objective", "primal", "dual", "rho", "time")}
     t0 = time.perf_counter()
+    hist = _History(t0)
     total_it = 0
     status = "converged"
     for j in range(k):
@@ -289,7 +310,7 @@ def admm_sequential(W, area_diag, k: int, mu: float, *, weighting: str = "area",
             e_old, s_old = e, s
             e = estep.solve(rho, rho * a * (psi + ue))
             v = psi + us
-            s = np.sign(v) * np.maximum(np.abs(v) - mu * w / (a * rho), 0.0)
+            s = soft_threshold(v, mu * w / (a * rho))
             ue += psi - e
             us += psi - s
             primal = np.sqrt(np.sum(a * ((psi - e) ** 2 + (psi - s) ** 2)))
@@ -304,11 +325,10 @@ def admm_sequential(W, area_diag, k: int, mu: float, *, weighting: str = "area",
         if col_status != "converged":
             status = col_status
         Phi = np.concatenate([Phi, psi[:, None]], axis=1)
-        hist["objective"].append(_true_objective(W, w, mu, Phi))
-        hist["time"].append(time.perf_counter() - t0)
+        hist.record(objective=_true_objective(W, w, mu, Phi))
     Psi_out = orthonormalize(Phi, a)
     return ADMMResult(
         Psi=Psi_out, objective=_true_objective(W, w, mu, Psi_out), iterations=total_it, status=status,
-        history={key: np.asarray(v) for key, v in hist.items()}, wall_time=time.perf_counter() - t0,
+        history=hist.arrays(), wall_time=time.perf_counter() - t0,
         factor_time=estep.factor_time, n_factorizations=estep.count,
     )

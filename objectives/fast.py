@@ -26,7 +26,8 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 
-from .admm import ADMMOptions, ADMMResult, _polar, _true_objective, l1_weights_np, orthonormalize, RhoRule
+from .admm import (ADMMOptions, ADMMResult, RhoRule, _History, _polar, _true_objective, l1_weights_np,
+                   orthonormalize, soft_threshold)
 
 __all__ = ["restricted_matrices", "restricted_eigenbasis", "restricted_admm"]
 
@@ -90,10 +91,10 @@ def restricted_admm(W, area_diag, U, k: int, mu: float, *, weighting: str = "are
     US = np.zeros_like(S)
     rho = float(options.rho if options.rho is not None else max(mu, 1.0))
     factors: dict = {}
-    hist = {key: [] for key in ("objective", "primal", "dual", "rho", "time")}
     status = "max_iters"
     rule = RhoRule(options)
     t0 = time.perf_counter()
+    hist = _History(t0)
     it = 0
     for it in range(1, options.max_iters + 1):
         B = Abar @ (E - UE) + UtA @ (S - US)
@@ -104,22 +105,18 @@ def restricted_admm(W, area_diag, U, k: int, mu: float, *, weighting: str = "are
         E = sla.cho_solve(factors[rho], rho * (Abar @ (X + UE)))
         UX = U @ X
         V_ = UX + US
-        S = np.sign(V_) * np.maximum(np.abs(V_) - mu * (w / a)[:, None] / rho, 0.0)
+        S = soft_threshold(V_, mu * (w / a)[:, None] / rho)
         UE += X - E
         US += UX - S
         primal = np.sqrt(np.sum((X - E) * (Abar @ (X - E))) + np.sum(a[:, None] * (UX - S) ** 2))
         dS = S - S_old
         dual = rho * np.sqrt(np.sum((E - E_old) * (Abar @ (E - E_old))) + np.sum(a[:, None] * dS**2))
-        hist["objective"].append(_true_objective(W, w, mu, UX))
-        hist["primal"].append(primal)
-        hist["dual"].append(dual)
-        hist["rho"].append(rho)
-        hist["time"].append(time.perf_counter() - t0)
+        elapsed = hist.record(objective=_true_objective(W, w, mu, UX), primal=primal, dual=dual, rho=rho)
         tol = np.sqrt(n * k) * options.eps_abs + options.eps_rel * np.sqrt(k)
         if primal <= tol and dual <= tol + options.eps_rel * rho * np.sqrt(np.sum(a[:, None] * US**2)):
             status = "converged"
             break
-        if hist["time"][-1] > options.time_limit:
+        if elapsed > options.time_limit:
             status = "time_limit"
             break
         rho = rule.apply(it, primal, dual, rho, UE, US)
@@ -127,7 +124,7 @@ def restricted_admm(W, area_diag, U, k: int, mu: float, *, weighting: str = "are
     Psi = U @ X
     return ADMMResult(
         Psi=Psi, objective=_true_objective(W, w, mu, Psi), iterations=it, status=status,
-        history={key: np.asarray(v) for key, v in hist.items()}, wall_time=time.perf_counter() - t0,
+        history=hist.arrays(), wall_time=time.perf_counter() - t0,
         factor_time=0.0, n_factorizations=len(factors),
     )
 

@@ -216,3 +216,15 @@ def test_active_set_block_solver_agrees_with_shifted(hand):
     h = res.history
     assert len(h["time"]) == len(h["objective"]) == res.iterations + 1
     assert np.all(np.diff(h["time"]) >= 0)
+
+
+def test_soft_threshold_is_the_l1_prox():
+    """S-step: soft_threshold(v, t) = argmin_s t|s| + ½(s − v)² (checked on a fine grid)."""
+    from objectives.admm import soft_threshold
+
+    grid = np.linspace(-3.0, 3.0, 60001)
+    for v, t in [(2.0, 0.5), (-1.2, 0.3), (0.2, 0.5), (0.0, 1.0), (-0.4, 0.4)]:
+        best = grid[np.argmin(t * np.abs(grid) + 0.5 * (grid - v) ** 2)]
+        assert abs(float(soft_threshold(np.asarray(v), t)) - best) <= 1e-4
+    V = np.array([[1.0, -2.0], [0.1, 0.0]])
+    np.testing.assert_array_equal(soft_threshold(V, np.array([[0.5], [0.2]])), [[0.5, -1.5], [0.0, 0.0]])
