@@ -22,9 +22,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
-import sys
 import time
 from pathlib import Path
 
@@ -34,9 +31,9 @@ jax.config.update("jax_enable_x64", True)  # benchmark script (an application), 
 
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
-import scipy  # noqa: E402
 
 import mesh  # noqa: E402
+from bench.environment import run_meta  # noqa: E402
 from objectives.batch import cmm_batch, cmm_problem, default_options  # noqa: E402
 
 MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
@@ -174,11 +171,8 @@ def main(argv=None):
     p.add_argument("--out", default=str(Path(__file__).with_name("results_batch.json")))
     args = p.parse_args(argv)
     results = [run_mesh(name, args) for name in args.meshes]
-    meta = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
-            "machine": f"{platform.machine()}, {os.cpu_count()} cores ({platform.processor() or 'cpu'})",
-            "jax": jax.__version__, "scipy": scipy.__version__, "numpy": np.__version__, "batch": args.batch, "k": args.k,
-            "iters": args.iters, "repeats": args.repeats, "mu_lo": args.mu_lo, "mu_hi": args.mu_hi,
-            "command": "python -m bench.bench_batch " + " ".join(argv if argv is not None else sys.argv[1:])}
+    meta = run_meta("bench.bench_batch", argv, batch=args.batch, k=args.k,
+                   iters=args.iters, repeats=args.repeats, mu_lo=args.mu_lo, mu_hi=args.mu_hi)
     Path(args.out).write_text(json.dumps({"meta": meta, "results": results}, indent=1))
     md = markdown(meta, results)
     print(md)

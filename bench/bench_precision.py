@@ -23,10 +23,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
-import sys
-import time
 from pathlib import Path
 
 import jax
@@ -35,9 +31,9 @@ jax.config.update("jax_enable_x64", True)  # benchmark script (an application), 
 
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
-import scipy  # noqa: E402
 
 import mesh  # noqa: E402
+from bench.environment import run_meta  # noqa: E402
 import stiefel  # noqa: E402
 from objectives.admm import ADMMOptions, l1_weights_np  # noqa: E402
 from objectives.batch import cmm_batch, cmm_problem, default_options  # noqa: E402
@@ -146,11 +142,8 @@ def main(argv=None):
     p.add_argument("--out", default=str(Path(__file__).with_name("results_precision.json")))
     args = p.parse_args(argv)
     results = [run_mesh(name, args) for name in args.meshes]
-    meta = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
-            "machine": f"{platform.machine()}, {os.cpu_count()} cores ({platform.processor() or 'cpu'})",
-            "jax": jax.__version__, "scipy": scipy.__version__, "numpy": np.__version__, "k": args.k,
-            "mu_factor": args.mu_factor, "gtol": args.gtol, "ftol": args.ftol, "max_iters": args.max_iters,
-            "command": "python -m bench.bench_precision " + " ".join(argv if argv is not None else sys.argv[1:])}
+    meta = run_meta("bench.bench_precision", argv, k=args.k,
+                   mu_factor=args.mu_factor, gtol=args.gtol, ftol=args.ftol, max_iters=args.max_iters)
     Path(args.out).write_text(json.dumps({"meta": meta, "results": results}, indent=1))
     md = markdown(meta, results)
     print(md)

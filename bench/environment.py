@@ -1,0 +1,21 @@
+"""The machine-and-versions header shared by the benchmark scripts' results files."""
+
+from __future__ import annotations
+
+import os
+import platform
+import sys
+import time
+
+import jax
+import numpy as np
+import scipy
+
+
+def run_meta(module: str, argv: list[str] | None, **fields) -> dict:
+    """Date (UTC), machine, jax/scipy/numpy versions and the command line of ``python -m <module>``, plus ``fields``."""
+    args = argv if argv is not None else sys.argv[1:]
+    return {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+            "machine": f"{platform.machine()}, {os.cpu_count()} cores ({platform.processor() or 'cpu'})",
+            "jax": jax.__version__, "scipy": scipy.__version__, "numpy": np.__version__, **fields,
+            "command": f"python -m {module} " + " ".join(args)}
