@@ -192,11 +192,12 @@ class CMMEnergy(eqx.Module):
         """
         if getattr(manifold, "retraction", None) != "cholesky" or X.ndim != 2:
             return None
-        MXe = manifold.op.mv(jnp.concatenate([X, eta], axis=1))
-        WXe = self.W.mv(jnp.concatenate([X, eta], axis=1))
+        U = jnp.concatenate([X, eta], axis=1)
         k = X.shape[1]
-        G0, C, S = X.T @ MXe[:, :k], X.T @ MXe[:, k:], eta.T @ MXe[:, k:]
-        Q0, B, T = X.T @ WXe[:, :k], X.T @ WXe[:, k:], eta.T @ WXe[:, k:]
+        # all six k×k Gram blocks from one (2k × 4k) product (one GEMM instead of six skinny ones)
+        Gr = U.T @ jnp.concatenate([manifold.op.mv(U), self.W.mv(U)], axis=1)
+        G0, C, S = Gr[:k, :k], Gr[:k, k:2 * k], Gr[k:, k:2 * k]
+        Q0, B, T = Gr[:k, 2 * k:3 * k], Gr[:k, 3 * k:], Gr[k:, 3 * k:]
         eye = jnp.eye(k, dtype=X.dtype)
 
         def h(t):

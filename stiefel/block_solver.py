@@ -180,10 +180,10 @@ def _core(F, manifold: GeneralizedStiefel, P, X0, monitor, opts: BlockOptions):
         ).astype(jnp.int32)
         status = jnp.where(retry & (it >= max_iters), Status.MAX_ITERS, status).astype(jnp.int32)
         if method == "cg":
-            T_xi = manifold.transport(X_new, c.xi)
+            T_xi, T_eta = manifold.transport_pair(X_new, c.xi, eta_used)
             beta = jnp.maximum(_trace(G_new, xi_new - T_xi) / _trace(c.G, c.xi), 0.0)
             beta = jnp.where(jnp.isfinite(beta), beta, 0.0)
-            eta_next = jnp.where(retry, -c.xi, -xi_new + beta * manifold.transport(X_new, eta_used))
+            eta_next = jnp.where(retry, -c.xi, -xi_new + beta * T_eta)
             step_next = tau
             C_next, Q_next = F_new, c.Q
         else:

@@ -120,6 +120,14 @@ class GeneralizedStiefel(eqx.Module):
         """Vector transport by projection onto ``T_{X_new}``."""
         return self.proj(X_new, Z)
 
+    def transport_pair(self, X_new: Point, Z1: Point, Z2: Point) -> tuple[Point, Point]:
+        """``(transport(X_new, Z1), transport(X_new, Z2))`` with one ``(k × 2k)`` Gram product."""
+        k = Z1.shape[-1]
+        Z = jnp.concatenate([Z1, Z2], axis=-1)
+        B = X_new.T @ self.op.mv(Z)
+        T = Z - X_new @ jnp.concatenate([sym(B[:, :k]), sym(B[:, k:])], axis=-1)
+        return T[:, :k], T[:, k:]
+
     # --- points ------------------------------------------------------------------------------
     def project_to_manifold(self, Y: Point) -> Point:
         """The M-closest point of ``S_M`` to a full-rank ``Y``: ``Y (YᵀMY)^{-1/2}``."""

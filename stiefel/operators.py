@@ -10,9 +10,8 @@ shape ``(n,)`` or ``(n, k)``. Three implementations:
   neighbour table ("ELL": ``(n, w)`` column indices and values, ``w`` the
   largest row length). ``mv`` is ``w`` fused gathers with no scatter, which on
   CPU beat BCOO and ``segment_sum`` (see ``bench/RESULTS.md``). ``solve``
-  uses one sparse LDLᵀ factorisation computed on the host at construction
-  (``stiefel.sparse_factor.SymmetricFactor``: QDLDL, or SuperLU in symmetric
-  mode) and called through ``jax.pure_callback`` inside
+  uses one sparse factorisation computed on the host at construction
+  (``stiefel.sparse_factor.SymmetricFactor``: CHOLMOD, QDLDL or SuperLU) and called through ``jax.pure_callback`` inside
   ``lax.custom_linear_solve``, so it is jittable and differentiable. The
   matrix is never densified.
 
@@ -156,7 +155,7 @@ class _HostFactor(_ByContent):
     def batched(self, b: np.ndarray, ndim: int) -> np.ndarray:
         """Solve for ``b`` of shape ``batch + (n, ...)``: the ``b.ndim − ndim`` leading axes are a
         ``vmap`` batch (``vmap_method="expand_dims"``), moved behind ``n`` so one host call solves
-        every batch member (same per-column SuperLU solves, one callback instead of one per member)."""
+        every batch member (the same solves, one callback instead of one per member)."""
         lead = b.ndim - ndim
         if lead == 0:
             return self(b)

@@ -48,6 +48,18 @@ def test_projection_is_tangent_idempotent_and_M_orthogonal(kind):
     assert abs(float(jnp.sum((Y - PY) * S.op.mv(Z)))) < 1e-12
 
 
+@pytest.mark.parametrize("kind", M_KINDS)
+def test_transport_pair_is_two_transports(kind):
+    """The block solver's fused transport equals two projections (to rounding)."""
+    S = GeneralizedStiefel(metric_matrix(kind, N), K)
+    X = S.random_point(jax.random.PRNGKey(5))
+    Z1, Z2 = (jax.random.normal(jax.random.PRNGKey(s), X.shape) for s in (6, 7))
+    T1, T2 = S.transport_pair(X, Z1, Z2)
+    np.testing.assert_allclose(T1, S.transport(X, Z1), atol=1e-13)
+    np.testing.assert_allclose(T2, S.transport(X, Z2), atol=1e-13)
+    assert not np.allclose(T1, Z1)  # the projection did something
+
+
 def test_metrics_differ_only_on_rotations():
     """Canonical metric halves the weight of the XᵀMZ (rotation) part (MATH.md §1)."""
     M = metric_matrix("diagonal", N)

@@ -86,7 +86,7 @@ def test_equal_matrices_give_equal_static_parts():
     assert a.factor != c.factor and a.csr != c.csr
 
 
-@pytest.mark.parametrize("backend,reorder", [("qdldl", True), ("superlu", True), ("superlu", False)])
+@pytest.mark.parametrize("backend,reorder", [("cholmod", True), ("qdldl", True), ("superlu", True), ("superlu", False)])
 def test_symmetric_factor_solves_against_dense(backend, reorder):
     from stiefel.sparse_factor import SymmetricFactor
 
@@ -102,7 +102,28 @@ def test_symmetric_factor_solves_against_dense(backend, reorder):
     np.testing.assert_allclose(f(b2), np.linalg.solve(dense, b2), rtol=1e-10, atol=1e-12)
     op = f.as_linear_operator()
     np.testing.assert_allclose(op.matmat(b2), np.linalg.solve(dense, b2), rtol=1e-10, atol=1e-12)
-    assert f.nnz >= S.nnz // 2
+    np.testing.assert_allclose(f(b2[:, :1]), np.linalg.solve(dense, b2[:, :1]), rtol=1e-10, atol=1e-12)
+    if backend == "cholmod":
+        assert f.nnz is None  # not exposed by cholespy
+    else:
+        assert f.nnz >= S.nnz // 2
+
+
+def test_symmetric_factor_cholmod_is_the_default_and_falls_back_on_indefinite(capfd):
+    """CHOLMOD (cholespy, a dependency) is the default; an indefinite matrix raises with
+    ``check`` and is factored by LDLᵀ without it — the backend says which, stderr stays clean."""
+    from stiefel.sparse_factor import SymmetricFactor, default_backend, ldl_backend
+
+    assert default_backend() == "cholmod"
+    S = sp.csr_matrix(np.array([[2.0, 1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 0.0, 3.0]]))
+    with pytest.raises(NotSPDError, match="Cholesky"):
+        SymmetricFactor(S)
+    f = SymmetricFactor(S, check=False)
+    assert f.backend == ldl_backend()
+    np.testing.assert_allclose(S @ f.solve(np.ones(3)), np.ones(3), atol=1e-14)
+    assert "CHOLMOD" not in capfd.readouterr().err
+    with pytest.raises(NotSPDError):
+        SymmetricFactor(sp.csr_matrix(np.array([[1.0, 1.0], [1.0, 1.0]])))
 
 
 @pytest.mark.parametrize("backend", ["qdldl", "superlu"])
