@@ -89,7 +89,8 @@ class ActiveSetPreconditioner:
             key = hash(free.tobytes())
             entry = self._cache.get(key) or cache.get(key)
             if entry is None or not np.array_equal(entry[0], free):
-                entry = (free, SymmetricFactor(self.K[free][:, free], check=False, backend=self._backend) if free.size else None)
+                factor = SymmetricFactor(self.K[free][:, free], check=False, backend=self._backend) if free.size else None
+                entry = (free, factor)
             cache[key] = entry
             columns.append(entry)
         self._cache, self.columns = cache, columns

@@ -11,8 +11,8 @@ shape ``(n,)`` or ``(n, k)``. Three implementations:
   largest row length). ``mv`` is ``w`` fused gathers with no scatter, which on
   CPU beat BCOO and ``segment_sum`` (see ``bench/RESULTS.md``). ``solve``
   uses one sparse factorisation computed on the host at construction
-  (``stiefel.sparse_factor.SymmetricFactor``: CHOLMOD, QDLDL or SuperLU) and called through ``jax.pure_callback`` inside
-  ``lax.custom_linear_solve``, so it is jittable and differentiable. The
+  (``stiefel.sparse_factor.SymmetricFactor``: CHOLMOD, QDLDL or SuperLU) and
+  called through ``jax.pure_callback`` inside ``lax.custom_linear_solve``, so it is jittable and differentiable. The
   matrix is never densified.
 
 ``as_operator`` builds the right one and, with ``check=True``, validates that

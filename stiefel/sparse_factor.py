@@ -17,8 +17,8 @@ backends:
   indefinite matrix (e.g. a shift inside the spectrum) is factored by QDLDL
   instead, and ``backend`` says so.
 * ``"qdldl"`` (a dependency): QDLDL's ``LDLᵀ`` with its AMD ordering; handles
-  symmetric quasi-definite (indefinite) matrices. Measured against SuperLU on this project's 2-core
-  CPU (``W + A``, 10 right-hand sides): camelhead 6.5 vs 10.6 ms per solve batch,
+  symmetric quasi-definite (indefinite) matrices. Measured against SuperLU on this
+  project's 2-core CPU (``W + A``, 10 right-hand sides): camelhead 6.5 vs 10.6 ms per solve batch,
   armadillo_25479 12.7 vs 22.3 ms, factorisation 2–4× faster.
 * ``"superlu"`` (scipy, always available): the matrix is renumbered by reverse
   Cuthill–McKee, then SuperLU orders it by minimum degree on ``S + Sᵀ`` in
@@ -29,9 +29,8 @@ backends:
 
 With ``check=True`` a failed Cholesky factorisation, an ``LDLᵀ`` with a
 non-positive pivot (or, for SuperLU, one that needed off-diagonal pivoting) raises
-``NotSPDError`` (Sylvester: a
-symmetric matrix is positive definite exactly when every pivot of its ``LDLᵀ``
-is).
+``NotSPDError`` (Sylvester: a symmetric matrix is positive definite exactly when
+every pivot of its ``LDLᵀ`` is, and exactly when its Cholesky factor exists).
 """
 
 from __future__ import annotations
