@@ -43,6 +43,7 @@ __all__ = ["CMMResult", "compressed_modes", "select_mu", "METHODS", "unpack_lapl
 
 METHODS = ("block", "sequential", "admm", "admm_sequential", "fast")
 PRECONDITIONERS = ("shifted", "active_set")
+OPTIMIZERS = ("cg", "lbfgs")
 
 
 @dataclasses.dataclass
@@ -135,15 +136,16 @@ def _continuation(eps: float, steps: int, start: float) -> list[float]:
     return list(np.geomspace(start, eps, steps))
 
 
-def _block_rounds(F, manifold, X, P, *, gtol: float, ftol: float, max_iters: int, refresh: int | None = None):
-    """Riemannian CG on the block, in one run (fixed ``P``) or in rounds of ``refresh``
+def _block_rounds(F, manifold, X, P, *, gtol: float, ftol: float, max_iters: int, refresh: int | None = None,
+                  optimizer: str = "cg"):
+    """Riemannian CG/L-BFGS (``optimizer``) on the block, in one run (fixed ``P``) or in rounds of ``refresh``
     iterations with an ``ActiveSetPreconditioner`` rebuilt before each round.
 
     Returns ``(X, iterations, status, run seconds (incl. refreshes), compile seconds,
     history {"time", "value", "monitor"})``; a round that ends converged ends the run.
     """
     if not isinstance(P, ActiveSetPreconditioner):
-        res = stiefel.minimize(F, manifold, X, method="cg", preconditioner=P, gtol=gtol, ftol=ftol,
+        res = stiefel.minimize(F, manifold, X, method=optimizer, preconditioner=P, gtol=gtol, ftol=ftol,
                                max_iters=max_iters, monitor=F.true_value)
         h = res.trimmed_history()
         h["time"] = np.linspace(0.0, res.wall_time, len(h["value"]))
@@ -154,7 +156,7 @@ def _block_rounds(F, manifold, X, P, *, gtol: float, ftol: float, max_iters: int
         t0 = time.perf_counter()
         P.refresh(X)
         wall += time.perf_counter() - t0
-        res = stiefel.minimize(F, manifold, X, method="cg", preconditioner=P.apply, gtol=gtol, ftol=ftol,
+        res = stiefel.minimize(F, manifold, X, method=optimizer, preconditioner=P.apply, gtol=gtol, ftol=ftol,
                                max_iters=min(refresh, max_iters - done), monitor=F.true_value, check=False)
         h = res.trimmed_history()
         first = 0 if done == 0 else 1  # a later round's entry 0 repeats the previous round's last
@@ -191,6 +193,7 @@ def compressed_modes(
     preconditioner_shift: float | None = None,
     preconditioner: str = "shifted",
     refresh: int = 50,
+    optimizer: str = "cg",
     admm_options: ADMMOptions | None = None,
     local_functions=None,
     callback=None,
@@ -221,6 +224,9 @@ def compressed_modes(
         (``objectives.active_set``: per column, ``W + σA`` plus the ℓ1 curvature on the entries
         pinned at zero, rebuilt every ``refresh`` iterations).
       refresh: iterations per round of the active-set preconditioner.
+      optimizer: the block solver's method, ``"cg"`` (Riemannian CG) or ``"lbfgs"`` (Riemannian
+        L-BFGS, ``stiefel.minimize``); each round of the active-set preconditioner starts a new
+        L-BFGS memory.
       admm_options: ``ADMMOptions`` for the ADMM methods.
       local_functions: ``(n, d)`` sparse U for ``method="fast"``.
       callback: for ``method="sequential"``, ``callback(j, info)`` after each finished column
@@ -237,7 +243,8 @@ def compressed_modes(
         raise ValueError(f"mu must be a finite non-negative number, got {mu}")
     params = dict(k=k, mu=mu, method=method, smoothing=smoothing, eps=eps, delta=delta, weighting=weighting,
                   seed=seed, start=start if isinstance(start, str) else "array", gtol=gtol, ftol=ftol,
-                  max_iters=max_iters, continuation=continuation, continuation_start=continuation_start)
+                  max_iters=max_iters, continuation=continuation, continuation_start=continuation_start,
+                  optimizer=optimizer)
     t_setup = time.perf_counter()
     if method == "fast" and local_functions is None:
         raise ValueError("method='fast' needs local_functions=U (n × d), e.g. mesh.local_functions(m, n_samples=d).U")
@@ -287,6 +294,10 @@ def compressed_modes(
             raise ValueError("preconditioner='active_set' needs method='block'")
         if refresh < 1:
             raise ValueError(f"refresh must be ≥ 1, got {refresh}")
+        if optimizer not in OPTIMIZERS:
+            raise ValueError(f"unknown optimizer {optimizer!r}; choose one of {OPTIMIZERS}")
+        if optimizer != "cg" and method != "block":
+            raise ValueError(f"optimizer={optimizer!r} needs method='block' (the sequential solver uses CG)")
         # every array of the problem in the computation dtype (float32 runs stay float32)
         dt = np.dtype(dtype or (jnp.float64 if jax.config.jax_enable_x64 else jnp.float32))
         t_factor = time.perf_counter()  # the preconditioner's factorisation is part of the run, as ADMM's E-step is
@@ -308,9 +319,10 @@ def compressed_modes(
                 if P is None:
                     active = ActiveSetPreconditioner(W, a, sigma, mu, l1_weights_np(a, weighting), s)
                     run = _block_rounds(F, manifold, X, active, gtol=gtol, ftol=ftol, max_iters=max_iters,
-                                        refresh=refresh)
+                                        refresh=refresh, optimizer=optimizer)
                 else:
-                    run = _block_rounds(F, manifold, X, P, gtol=gtol, ftol=ftol, max_iters=max_iters)
+                    run = _block_rounds(F, manifold, X, P, gtol=gtol, ftol=ftol, max_iters=max_iters,
+                                        optimizer=optimizer)
                 X, it_stage, st, t_run, t_compile, h = run
                 iters += it_stage
                 true_values.extend(list(h["monitor"]))

@@ -25,7 +25,7 @@ def problem():
     return W, M, F, float(np.sum(vals))
 
 
-@pytest.mark.parametrize("method", ["cg", "bb"])
+@pytest.mark.parametrize("method", ["cg", "bb", "lbfgs"])
 @pytest.mark.parametrize("retraction", ["cayley", "cholesky", "polar"])
 def test_trace_minimisation_preconditioned(problem, method, retraction):
     W, M, F, target = problem
@@ -38,7 +38,7 @@ def test_trace_minimisation_preconditioned(problem, method, retraction):
     assert int(res.iterations) < 150
 
 
-@pytest.mark.parametrize("method", ["cg", "bb"])
+@pytest.mark.parametrize("method", ["cg", "bb", "lbfgs"])
 @pytest.mark.parametrize("metric", ["euclidean", "canonical"])
 def test_trace_minimisation_plain(problem, method, metric):
     W, M, F, target = problem
@@ -91,6 +91,8 @@ def test_bad_start_and_options(problem):
         minimize(F, S, X0.at[0, 0].set(jnp.nan))
     with pytest.raises(StiefelError, match="unknown method"):
         minimize(F, S, X0, method="newton")
+    with pytest.raises(StiefelError, match="memory"):
+        minimize(F, S, X0, method="lbfgs", memory=0)
     # project_to_manifold fixes the start
     res = minimize(F, S, S.project_to_manifold(2.0 * X0 + 0.1), max_iters=2)
     assert int(res.status) in (Status.MAX_ITERS, Status.CONVERGED)
@@ -129,3 +131,32 @@ def test_ftol_stops_a_stalled_solve(problem):
     assert abs(float(stalled.value) - target) <= 1e-10 * target
     full = minimize(F, S, X0, gtol=1e-30, max_iters=300, preconditioner=P)
     assert int(full.status) == Status.MAX_ITERS
+
+
+@pytest.mark.parametrize("preconditioned", [False, True])
+def test_lbfgs_needs_fewer_evaluations_than_cg(problem, preconditioned):
+    """L-BFGS (two-loop, memory 8) reaches the same minimum as CG with fewer objective evaluations
+    (measured on this problem: 69 vs 75 with the preconditioner, under half without); its
+    iterates stay on the manifold and its history is monotone (Wolfe steps)."""
+    W, M, F, target = problem
+    S = GeneralizedStiefel(M, K, retraction="cholesky")
+    X0 = S.random_point(jax.random.PRNGKey(6))
+    P = shifted_inverse(W, M, 0.05) if preconditioned else None
+    cg = minimize(F, S, X0, method="cg", gtol=1e-9, max_iters=5000, preconditioner=P)
+    lb = minimize(F, S, X0, method="lbfgs", gtol=1e-9, max_iters=5000, preconditioner=P)
+    assert cg.converged and lb.converged, (cg.status_name, lb.status_name)
+    assert abs(float(lb.value) - target) <= 1e-10 * target
+    assert float(S.dist_to_manifold(lb.x)) <= 1e-12
+    assert int(lb.stats["n_fevals"]) < (1.0 if preconditioned else 0.6) * int(cg.stats["n_fevals"])
+    h = lb.trimmed_history()["value"]
+    assert np.all(np.diff(h) <= 1e-12 * target)
+
+
+def test_lbfgs_memory_one_is_still_a_descent_method(problem):
+    """With one stored pair the recursion still gives descent directions and converges."""
+    W, M, F, target = problem
+    S = GeneralizedStiefel(M, K, retraction="cholesky")
+    res = minimize(F, S, S.random_point(jax.random.PRNGKey(7)), method="lbfgs", memory=1, gtol=1e-8,
+                   max_iters=5000, preconditioner=shifted_inverse(W, M, 0.05))
+    assert res.converged, res.status_name
+    assert abs(float(res.value) - target) <= 1e-9 * target

@@ -107,6 +107,10 @@ def test_bad_parameters(hand):
         compressed_modes(hand, 3, 1.0, preconditioner="ilu")
     with pytest.raises(ValueError, match="needs method='block'"):
         compressed_modes(hand, 3, 1.0, method="sequential", preconditioner="active_set")
+    with pytest.raises(ValueError, match="unknown optimizer"):
+        compressed_modes(hand, 3, 1.0, optimizer="newton")
+    with pytest.raises(ValueError, match="needs method='block'"):
+        compressed_modes(hand, 3, 1.0, method="sequential", optimizer="lbfgs")
 
 
 @pytest.fixture(scope="module")
@@ -216,6 +220,19 @@ def test_active_set_block_solver_agrees_with_shifted(hand):
     h = res.history
     assert len(h["time"]) == len(h["objective"]) == res.iterations + 1
     assert np.all(np.diff(h["time"]) >= 0)
+
+
+@pytest.mark.parametrize("preconditioner", ["shifted", "active_set"])
+def test_lbfgs_block_solver_agrees_with_cg(hand, preconditioner):
+    """optimizer="lbfgs" reaches CG's CMM objective (within 1e-3) on hand_868, k = 6, μ = 0.01n."""
+    mu = 0.01 * hand.n
+    ref = compressed_modes(hand, 6, mu, weighting="uniform")
+    res = compressed_modes(hand, 6, mu, weighting="uniform", optimizer="lbfgs", preconditioner=preconditioner,
+                           refresh=25)
+    assert res.status == "converged", res.status
+    assert res.params["optimizer"] == "lbfgs"
+    assert res.orthogonality <= 1e-10
+    assert abs(res.objective - ref.objective) <= 1e-3 * ref.objective
 
 
 def test_soft_threshold_is_the_l1_prox():
