@@ -109,14 +109,15 @@ def cmm_problem(lap, k: int, *, smoothing: str = "f6", weighting: str = "area",
     """The energy, manifold (A-orthonormality, Cholesky retraction) and preconditioner of a CMM
     problem in ``dtype``, and the eigenbasis start ``(n, k)`` (float64 numpy).
 
-    ``sigma`` (the shift of ``W + σA``) defaults to λ₁, as in ``compressed_modes``.
+    ``sigma`` (the shift of ``W + σA``) defaults to the largest of the first k eigenvalues (λ₁ for
+    k ≤ 2), as in ``compressed_modes``.
     """
     if preconditioner not in PRECONDITIONERS:
         raise ValueError(f"preconditioner must be one of {PRECONDITIONERS}, got {preconditioner!r}")
     W, a = unpack_laplacian(lap)
     dtype = np.dtype(dtype or (jnp.float64 if jax.config.jax_enable_x64 else jnp.float32))
     evals, evecs = first_eigenpairs(W, a, max(k, 2))
-    sigma = float(max(evals[1], 1e-12)) if sigma is None else float(sigma)
+    sigma = float(max(evals[-1], 1e-12)) if sigma is None else float(sigma)
     Wop = SparseOperator.from_scipy(W, dtype=dtype)
     energy = cmm_energy(Wop, jnp.asarray(a, dtype=dtype), 1.0, smoothing=smoothing, weighting=weighting)
     manifold = stiefel.GeneralizedStiefel(a, k, retraction="cholesky", dtype=dtype)
@@ -175,7 +176,7 @@ def cmm_batch(
       weighting: ``"area"`` or ``"uniform"`` ℓ1 weights.
       preconditioner: ``"shifted"`` ((W + σA)⁻¹, sparse LDLᵀ on the host), ``"jacobi"`` (its
         diagonal, pure JAX) or None.
-      sigma: σ; default λ₁.
+      sigma: σ; default the largest of the first k eigenvalues (as ``compressed_modes``).
       options: ``stiefel.BlockOptions`` (default ``default_options()``).
       mode: ``"vmap"`` (one vmapped program) or ``"loop"`` (the single-problem program,
         compiled once, called B times from Python).

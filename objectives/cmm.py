@@ -5,7 +5,7 @@
 diagnostics. Methods:
 
 * ``"block"`` (default) — the smoothed energy over the whole matrix with
-  Riemannian CG (``stiefel.minimize``), preconditioned by ``(W + σA)⁻¹``, started
+  Riemannian CG (``stiefel.minimize``), preconditioned by ``(W + σA)⁻¹`` (σ = λ_{k−1}), started
   from the first k eigenfunctions, with continuation on the smoothing parameter
   (ε, δ ← large → target, warm-started);
 * ``"sequential"`` — thesis Algorithm 6 (``stiefel.minimize_sequential``), same
@@ -218,7 +218,10 @@ def compressed_modes(
         the target ε/δ (1, the default: none — from the eigenbasis start, going straight
         to the target smoothing reached the ADMM objective far sooner on fandisk; more
         stages can find lower minima on long runs, MATH.md notes).
-      preconditioner_shift: σ in ``(W + σA)⁻¹`` (default: λ₁, the first non-zero eigenvalue).
+      preconditioner_shift: σ in ``(W + σA)⁻¹`` (default: the largest of the first k eigenvalues,
+        λ_{k−1} (λ₁ for k ≤ 2), the scale of the modes sought — against λ₁ it cut the block
+        solver's iterations to ADMM's best from 87 to 38 (fandisk), 836 to 322 (camelhead) and
+        553 to 209 (armadillo), k = 10, ``bench/RESULTS.md``).
       preconditioner: manifold methods' preconditioner: ``"shifted"`` (``(W + σA)⁻¹``, one
         factorisation) or, for ``method="block"``, ``"active_set"``
         (``objectives.active_set``: per column, ``W + σA`` plus the ℓ1 curvature on the entries
@@ -287,7 +290,7 @@ def compressed_modes(
         Psi, iters, wall, compile_t, status = res.Psi, res.iterations, res.wall_time, 0.0, res.status
         history = {"time": res.history["time"], "objective": res.history["objective"]}
     else:
-        sigma = preconditioner_shift if preconditioner_shift is not None else float(max(evals[1], 1e-12))
+        sigma = preconditioner_shift if preconditioner_shift is not None else float(max(evals[-1], 1e-12))
         if preconditioner not in PRECONDITIONERS:
             raise ValueError(f"unknown preconditioner {preconditioner!r}; choose one of {PRECONDITIONERS}")
         if preconditioner == "active_set" and method != "block":
