@@ -13,8 +13,9 @@ Methods:
   step, or less when the last decrease predicts less, N&W eq. 3.60).
   The ``memory`` pairs ``s = τη``, ``y = ξ⁺ − ξ`` are kept as ambient matrices and
   the direction is projected onto the current tangent space once (no transport of
-  the memory: k×n products saved per pair and iteration; on the CMM benchmark the
-  iteration counts matched the transported variant). The initial inverse Hessian is
+  the memory, which saves 2m projections per iteration; in a prototype on the CMM
+  benchmark the untransported memory needed 38 iterations to ADMM's best on fandisk
+  against 34 transported, and 541 against 673 on camelhead). The initial inverse Hessian is
   the preconditioner (``q ↦ proj_X(P M q)``), or ``⟨s, y⟩/⟨y, y⟩·I`` without one.
   Pairs with ``⟨s, y⟩ ≤ 0`` are skipped; a non-descent direction resets the memory.
 
@@ -91,6 +92,10 @@ class BlockOptions:
     ftol: float = 0.0
     ftol_window: int = 20
     memory: int = 8
+
+    def __post_init__(self):
+        if self.method == "lbfgs" and self.memory < 1:
+            raise StiefelError(f"memory must be ≥ 1 for method='lbfgs', got {self.memory}")
 
 
 def _core(F, manifold: GeneralizedStiefel, P, X0, monitor, opts: BlockOptions):
@@ -251,7 +256,7 @@ def _core(F, manifold: GeneralizedStiefel, P, X0, monitor, opts: BlockOptions):
         if opts.ftol > 0:  # stalled: relative decrease over the last ftol_window iterations ≤ ftol
             past = c.history.value[jnp.maximum(it - opts.ftol_window, 0)]
             conv = conv | ((it >= opts.ftol_window) & ok & (past - F_new <= opts.ftol * jnp.abs(F_new)))
-        # a failed search along a CG direction is retried along −ξ before giving up
+        # a failed search along a CG / L-BFGS direction is retried along −ξ (a reset) before giving up
         retry = ~ok & ~restart if method in ("cg", "lbfgs") else jnp.zeros((), bool)
         status = jnp.where(
             retry, -1,
@@ -403,8 +408,6 @@ def minimize(
     X0 = jnp.asarray(X0, dtype=manifold.dtype)
     if check:
         manifold.check_point(X0, atol=max(1e-8, 1e3 * float(jnp.finfo(manifold.dtype).eps)))
-    if method == "lbfgs" and memory < 1:
-        raise StiefelError(f"memory must be ≥ 1, got {memory}")
     P = as_preconditioner(preconditioner)
     c2 = (0.9 if method == "lbfgs" else 0.1) if c2 is None else c2
     opts = BlockOptions(method=method, gtol=float(gtol), xtol=float(xtol), max_iters=int(max_iters), c1=float(c1),
