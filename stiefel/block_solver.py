@@ -142,6 +142,21 @@ def _core(F, manifold: GeneralizedStiefel, P, X0, monitor, opts: BlockOptions):
     )
     xi_norm_cap = jnp.asarray(max_move, dtype)
 
+    def interpolated_step(c: _Carry, slope, fallback):
+        """Initial step by quadratic interpolation on the last decrease (N&W eq. 3.60), or ``fallback``."""
+        guess = 2.02 * (c.F - c.F_prev) / slope
+        return jnp.where(jnp.isfinite(guess) & (guess > 0), guess, fallback)
+
+    def wolfe_search(c: _Carry, eta, slope, guess):
+        """Strong Wolfe search along ``R_X(τη)`` from ``min(guess, max_move/‖η‖)``:
+        ``(X_new, step, accepted, n_evals)`` (CG and L-BFGS)."""
+        tau0 = jnp.minimum(guess, xi_norm_cap / manifold.norm(c.X, eta))
+        line = getattr(F, "line", None)  # an objective may evaluate F ∘ R_X(τη) faster itself
+        phi = line(manifold, c.X, eta) if callable(line) else None
+        phi = phi if phi is not None else along_curve(F, lambda t: manifold.retract(c.X, t * eta))
+        ls = strong_wolfe(phi, c.F, slope, tau0, c1=c1, c2=c2, max_evals=ls_max_evals, value_scale=F0)
+        return manifold.retract(c.X, ls.step * eta), ls.step, ls.accepted, ls.n_evals
+
     def precondition_tangent(X, q):
         """The preconditioner as a map of tangent vectors (the L-BFGS initial inverse Hessian)."""
         Mq = manifold.op.mv(q)
@@ -189,37 +204,20 @@ def _core(F, manifold: GeneralizedStiefel, P, X0, monitor, opts: BlockOptions):
         else:
             eta = jnp.where(restart, -c.xi, eta)
         slope = jnp.where(restart, _trace(c.G, eta), slope)
-        eta_norm = manifold.norm(c.X, eta)
         # unit step once the memory (or the preconditioner) sets the scale, unless the last decrease
         # predicts a shorter one (with P the Huber stiffness is missing from H₀: unit steps overshoot,
         # 3.2 → 1.0 trials per iteration on fandisk); before that, the initial guess
-        interp = 2.02 * (c.F - c.F_prev) / slope
-        interp = jnp.where(jnp.isfinite(interp) & (interp > 0), interp, 1.0)
-        guess = jnp.where((c.n_mem > 0) | (P is not None), jnp.minimum(1.0, interp), c.step)
-        tau0 = jnp.minimum(guess, xi_norm_cap / eta_norm)
-        line = getattr(F, "line", None)
-        phi = line(manifold, c.X, eta) if callable(line) else None
-        phi = phi if phi is not None else along_curve(F, lambda t: manifold.retract(c.X, t * eta))
-        ls = strong_wolfe(phi, c.F, slope, tau0, c1=c1, c2=c2, max_evals=ls_max_evals, value_scale=F0)
-        X_new = manifold.retract(c.X, ls.step * eta)
-        return X_new, ls.step, ls.accepted, ls.n_evals, eta, restart
+        unit = jnp.minimum(1.0, interpolated_step(c, slope, 1.0))
+        guess = jnp.where((c.n_mem > 0) | (P is not None), unit, c.step)
+        return (*wolfe_search(c, eta, slope, guess), eta, restart)
 
     def cg_step(c: _Carry):
         slope = _trace(c.G, c.eta)
         restart = ~(slope < 0)
         eta = jnp.where(restart, -c.xi, c.eta)
         slope = jnp.where(restart, -_trace(c.G, c.xi), slope)
-        eta_norm = manifold.norm(c.X, eta)
-        # initial step: quadratic interpolation on the last decrease (N&W eq. 3.60), capped
-        guess = jnp.where(c.it > 0, 2.02 * (c.F - c.F_prev) / slope, c.step)
-        guess = jnp.where(jnp.isfinite(guess) & (guess > 0), guess, c.step)
-        tau0 = jnp.minimum(guess, xi_norm_cap / eta_norm)
-        line = getattr(F, "line", None)  # an objective may evaluate F ∘ R_X(τη) faster itself
-        phi = line(manifold, c.X, eta) if callable(line) else None
-        phi = phi if phi is not None else along_curve(F, lambda t: manifold.retract(c.X, t * eta))
-        ls = strong_wolfe(phi, c.F, slope, tau0, c1=c1, c2=c2, max_evals=ls_max_evals, value_scale=F0)
-        X_new = manifold.retract(c.X, ls.step * eta)
-        return X_new, ls.step, ls.accepted, ls.n_evals, eta, restart
+        guess = jnp.where(c.it > 0, interpolated_step(c, slope, c.step), c.step)
+        return (*wolfe_search(c, eta, slope, guess), eta, restart)
 
     def bb_step(c: _Carry):
         eta = -c.xi
