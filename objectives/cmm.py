@@ -13,7 +13,8 @@ diagnostics. Methods:
 * ``"admm"`` / ``"admm_sequential"`` — the ADMM baseline (``objectives.admm``);
 * ``"fast"`` — Algorithm 8 (``objectives.fast.restricted_admm``) on the span of
   local functions ``U`` (pass ``local_functions=``, e.g. ``mesh.local_functions(m, n_samples=d).U``),
-  started from the restricted eigenbasis (Algorithm 7).
+  started from the restricted eigenbasis (Algorithm 7), with ρ = 2λ̄_k (the k-th restricted
+  eigenvalue) unless ``admm_options.rho`` is given.
 
 The Laplacian ``lap`` is anything with scipy-sparse attributes ``W`` (PSD
 stiffness) and ``A`` (diagonal lumped mass), e.g. ``mesh.laplacian(m)``, or a
@@ -276,7 +277,10 @@ def compressed_modes(
         opts = admm_options or ADMMOptions()
         Xr = None
         if isinstance(start, str) and start == "eigen":
-            Xr = restricted_eigenbasis(W, sp.diags_array(a), local_functions, k)[2]
+            evals_r, _, Xr = restricted_eigenbasis(W, sp.diags_array(a), local_functions, max(k, 2))
+            Xr = Xr[:, :k]
+            if opts.rho is None:  # as for the full ADMM below: ρ of the order of the modes' spectrum
+                opts = dataclasses.replace(opts, rho=2.0 * float(evals_r[k - 1] if k > 1 else evals_r[1]))
         res = restricted_admm(W, a, local_functions, k, mu, weighting=weighting, X0=Xr, seed=seed, options=opts)
         Psi, iters, wall, compile_t, status = res.Psi, res.iterations, res.wall_time, 0.0, res.status
         history = {"time": res.history["time"], "objective": res.history["objective"]}

@@ -12,8 +12,8 @@ With a row-normalised local-function matrix ``U`` (n × d, sparse; from
   ``X, E ∈ R^{d×k}``, ``S, U^S ∈ R^{n×k}``, ``U^E ∈ R^{d×k}``.
 
   X-step: maximise ``tr(XᵀB)``, ``B = Ā(E − U^E) + UᵀA(S − U^S)``, over ``XᵀĀX = I``:
-  ``X = Ā^{-1/2} polar(Ā^{-1/2} B)``.
-  E-step: ``(2W̄ + ρĀ) E = ρĀ(X + U^E)`` (d × d, factored once per ρ).
+  ``X = Ā^{-1/2} polar(Ā^{-1/2} B) = Ā⁻¹B (BᵀĀ⁻¹B)^{-1/2}`` (the latter form: one sparse solve).
+  E-step: ``(2W̄ + ρĀ) E = ρĀ(X + U^E)`` (d × d sparse, factored once per ρ).
   S-step: ``S = shrink(UX + U^S, μ w_i/(ρ a_i))``.
   Duals: ``U^E += X − E``, ``U^S += UX − S``. The final X is re-orthonormalised exactly.
 """
@@ -26,10 +26,21 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 
-from .admm import (ADMMOptions, ADMMResult, RhoRule, _History, _polar, _true_objective, l1_weights_np,
-                   orthonormalize, soft_threshold)
+from stiefel.errors import NotSPDError
+from stiefel.sparse_factor import SymmetricFactor
+
+from .admm import (ADMMOptions, ADMMResult, RhoRule, _History, _true_objective, l1_weights_np, orthonormalize,
+                   soft_threshold)
 
 __all__ = ["restricted_matrices", "restricted_eigenbasis", "restricted_admm"]
+
+
+def _restricted_sparse(Q, M, U):
+    """``(UᵀQU, UᵀMU)`` as sparse symmetric d × d csr arrays (each local function meets only its neighbours')."""
+    U = sp.csr_array(U)
+    Ut = U.T.tocsr()
+    Qbar, Mbar = sp.csr_array(Ut @ sp.csr_array(Q @ U)), sp.csr_array(Ut @ sp.csr_array(M @ U))
+    return sp.csr_array(0.5 * (Qbar + Qbar.T)), sp.csr_array(0.5 * (Mbar + Mbar.T))
 
 
 def restricted_matrices(Q, M, U):
@@ -67,21 +78,45 @@ def restricted_eigenbasis(Q, M, U, k: int, *, low_rank=None):
     return evals, np.asarray(sp.csr_array(U) @ coeffs), coeffs
 
 
+def _a_orthonormal_maximiser(B, Abar_factor):
+    """``argmax tr(XᵀB)`` over ``XᵀĀX = I``: ``X = Ā⁻¹B (BᵀĀ⁻¹B)^{-1/2}`` (= ``Ā^{-1/2} polar(Ā^{-1/2}B)``).
+
+    One sparse solve with the factored ``Ā`` and a k × k eigendecomposition; eigenvalues of
+    ``BᵀĀ⁻¹B`` below 1e-14 of the largest are clipped (rank-deficient B).
+    """
+    Y = Abar_factor.solve(B).reshape(B.shape)
+    vals, vecs = np.linalg.eigh(0.5 * (B.T @ Y + Y.T @ B))
+    vals = np.maximum(vals, 1e-14 * max(vals.max(), 1e-300))
+    return Y @ ((vecs / np.sqrt(vals)) @ vecs.T)
+
+
 def restricted_admm(W, area_diag, U, k: int, mu: float, *, weighting: str = "area", X0=None, seed: int = 0,
                     options: ADMMOptions = ADMMOptions()) -> ADMMResult:
-    """Algorithm 8: ADMM for CMMs restricted to ``span(U)``; returns lifted modes ``Ψ = UX``."""
+    """Algorithm 8: ADMM for CMMs restricted to ``span(U)``; returns lifted modes ``Ψ = UX``.
+
+    The restricted matrices ``W̄ = UᵀWU`` and ``Ā = UᵀAU`` stay sparse (d × d): the X-step
+    solves with ``Ā`` (factored once), the E-step with ``2W̄ + ρĀ`` (once per ρ), both by
+    ``stiefel.sparse_factor.SymmetricFactor``; the per-iteration objective is
+    ``tr(XᵀW̄X) + μ Σ w_i|(UX)_ij|`` (``(UX)ᵀW(UX) = XᵀW̄X``).
+    """
     W = sp.csr_array(W, dtype=np.float64)
     a = np.asarray(area_diag, dtype=np.float64)
     U = sp.csr_array(U, dtype=np.float64)
     n, d = U.shape
+    if not 1 <= k <= d:
+        raise ValueError(f"k must satisfy 1 ≤ k ≤ d = {d} (the number of local functions)")
     w = l1_weights_np(a, weighting)
-    A = sp.diags_array(a)
-    Wbar, Abar = restricted_matrices(W, A, U)
-    ev, V = np.linalg.eigh(Abar)
-    if ev.min() <= 0:
-        raise ValueError("UᵀAU is singular: the local functions are linearly dependent")
-    Abar_isqrt = (V / np.sqrt(ev)) @ V.T
-    UtA = (U.T @ A).tocsr()
+    Wbar, Abar = _restricted_sparse(W, sp.diags_array(a), U)
+    try:
+        Abar_factor = SymmetricFactor(Abar)
+    except NotSPDError as exc:
+        raise ValueError("UᵀAU is singular: the local functions are linearly dependent") from exc
+    Ut = U.T.tocsr()
+    thresh = mu * (w / a)[:, None]
+
+    def objective(X, UX):
+        return float(np.sum(X * (Wbar @ X)) + mu * np.sum(w[:, None] * np.abs(UX)))
+
     if X0 is None:
         X0 = np.random.default_rng(seed).standard_normal((d, k))
     X = orthonormalize(np.asarray(X0, dtype=np.float64), Abar)
@@ -97,21 +132,20 @@ def restricted_admm(W, area_diag, U, k: int, mu: float, *, weighting: str = "are
     hist = _History(t0)
     it = 0
     for it in range(1, options.max_iters + 1):
-        B = Abar @ (E - UE) + UtA @ (S - US)
-        X = Abar_isqrt @ _polar(Abar_isqrt @ B)
+        X = _a_orthonormal_maximiser(Abar @ (E - UE) + Ut @ (a[:, None] * (S - US)), Abar_factor)
         E_old, S_old = E, S
         if rho not in factors:
-            factors[rho] = sla.cho_factor(2.0 * Wbar + rho * Abar)
-        E = sla.cho_solve(factors[rho], rho * (Abar @ (X + UE)))
+            factors[rho] = SymmetricFactor(2.0 * Wbar + rho * Abar)
+        E = factors[rho].solve(rho * (Abar @ (X + UE))).reshape(X.shape)
         UX = U @ X
-        V_ = UX + US
-        S = soft_threshold(V_, mu * (w / a)[:, None] / rho)
+        S = soft_threshold(UX + US, thresh / rho)
         UE += X - E
         US += UX - S
-        primal = np.sqrt(np.sum((X - E) * (Abar @ (X - E))) + np.sum(a[:, None] * (UX - S) ** 2))
-        dS = S - S_old
-        dual = rho * np.sqrt(np.sum((E - E_old) * (Abar @ (E - E_old))) + np.sum(a[:, None] * dS**2))
-        elapsed = hist.record(objective=_true_objective(W, w, mu, UX), primal=primal, dual=dual, rho=rho)
+        XE = X - E
+        primal = np.sqrt(np.sum(XE * (Abar @ XE)) + np.sum(a[:, None] * (UX - S) ** 2))
+        dE = E - E_old
+        dual = rho * np.sqrt(np.sum(dE * (Abar @ dE)) + np.sum(a[:, None] * (S - S_old) ** 2))
+        elapsed = hist.record(objective=objective(X, UX), primal=primal, dual=dual, rho=rho)
         tol = np.sqrt(n * k) * options.eps_abs + options.eps_rel * np.sqrt(k)
         if primal <= tol and dual <= tol + options.eps_rel * rho * np.sqrt(np.sum(a[:, None] * US**2)):
             status = "converged"
@@ -127,4 +161,3 @@ def restricted_admm(W, area_diag, U, k: int, mu: float, *, weighting: str = "are
         history=hist.arrays(), wall_time=time.perf_counter() - t0,
         factor_time=0.0, n_factorizations=len(factors),
     )
-
