@@ -337,8 +337,8 @@ def markdown(meta, rows, exps, ks) -> str:
            f"μ = {meta['mu_factor']}·n, uniform weighting, eigenbasis start; {meta['iters']} iterations with "
            "gtol = 0 (fewer, at least 3, where a direct-solver run would exceed its time budget)",
            "* preconditioners: `library` = the library's `stiefel.shifted_inverse(W, A, λ₁)` "
-           "(`stiefel.sparse_factor.SymmetricFactor`: QDLDL with AMD ordering; skipped where its "
-           "factorisation is predicted over budget); "
+           f"(`stiefel.sparse_factor.SymmetricFactor`, backend `{meta.get('factor_backend', 'qdldl')}`; "
+           "skipped where its factorisation is predicted over budget; CHOLMOD does not report its factor's nnz); "
            "`superlu-colamd` = the same SuperLU factorisation with the COLAMD ordering (bench-side, "
            "`colamd_preconditioner`); `jacobi` = `diag(W + λ₁A)⁻¹`, O(n) (a 1-D array passed as `preconditioner=`)",
            f"* total: `library`, gtol 1e-4 / ftol 1e-5, ≤ {meta['total_iters']} iterations, k ∈ "
@@ -505,11 +505,14 @@ def main(argv=None):
         # predict the next size's eigsh time (×4 vertices, exponent 1.5)
         _predict(row, prior, rows)
     exps = exponents(rows, args.ks)
+    from stiefel.sparse_factor import default_backend
+
     dev = jax.devices()[0]
     meta = {"date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
             "machine": f"{platform.machine()}, {os.cpu_count()} cores, {platform.platform()}",
             "versions": f"python {platform.python_version()}, numpy {np.__version__}, scipy {scipy.__version__}, "
                         f"jax {jax.__version__}",
+            "factor_backend": default_backend(),
             "backend": jax.default_backend(), "device": getattr(dev, "device_kind", str(dev)),
             "openblas_threads": os.environ.get("OPENBLAS_NUM_THREADS"),
             "command": "python -m bench scaling " + " ".join(argv if argv is not None else sys.argv[1:]),
