@@ -58,7 +58,8 @@ class CMMResult:
     sparsity: fractions of entries with ``|ψ| < 1e-6·max|ψ|`` and ``< 1e-3·max|ψ|``.
     orthogonality: ``max|ΨᵀAΨ − I|``.
     iterations, wall_time (s, compile excluded; includes the preconditioner's and ADMM's
-      factorisations), compile_time, status, method, params.
+      factorisations), compile_time, status, method, params (the arguments; for the ADMM
+      methods also ``rho0``, the initial penalty used).
     history: objective trace ``{"time": (T,), "objective": (T,)}`` where available.
     """
 
@@ -281,6 +282,7 @@ def compressed_modes(
             Xr = Xr[:, :k]
             if opts.rho is None:  # as for the full ADMM below: ρ of the order of the modes' spectrum
                 opts = dataclasses.replace(opts, rho=2.0 * float(evals_r[k - 1] if k > 1 else evals_r[1]))
+        params["rho0"] = float(opts.rho if opts.rho is not None else max(mu, 1.0))
         res = restricted_admm(W, a, local_functions, k, mu, weighting=weighting, X0=Xr, seed=seed, options=opts)
         Psi, iters, wall, compile_t, status = res.Psi, res.iterations, res.wall_time, 0.0, res.status
         history = {"time": res.history["time"], "objective": res.history["objective"]}
@@ -289,6 +291,7 @@ def compressed_modes(
         if opts.rho is None and evals is not None:
             # ρ of the order of the spectrum of the modes sought: too small a ρ diverges
             opts = dataclasses.replace(opts, rho=2.0 * float(evals[k - 1] if k > 1 else evals[1]))
+        params["rho0"] = float(opts.rho if opts.rho is not None else max(mu, 1.0))
         run = admm if method == "admm" else admm_sequential
         res = run(W, a, k, mu, weighting=weighting, Psi0=X0, seed=seed, options=opts)
         Psi, iters, wall, compile_t, status = res.Psi, res.iterations, res.wall_time, 0.0, res.status

@@ -44,13 +44,9 @@ def _restricted_sparse(Q, M, U):
 
 
 def restricted_matrices(Q, M, U):
-    """``(UᵀQU, UᵀMU)`` as dense symmetric d × d arrays (d ≪ n)."""
-    U = sp.csr_array(U)
-    Qbar = (U.T @ (Q @ U))
-    Mbar = (U.T @ (M @ U))
-    Qbar = Qbar.toarray() if sp.issparse(Qbar) else np.asarray(Qbar)  # d × d: small by design
-    Mbar = Mbar.toarray() if sp.issparse(Mbar) else np.asarray(Mbar)
-    return 0.5 * (Qbar + Qbar.T), 0.5 * (Mbar + Mbar.T)
+    """``(UᵀQU, UᵀMU)`` as dense symmetric d × d arrays (d ≪ n; for the dense eigensolver of Algorithm 7)."""
+    Qbar, Mbar = _restricted_sparse(Q, M, U)
+    return Qbar.toarray(), Mbar.toarray()
 
 
 def restricted_eigenbasis(Q, M, U, k: int, *, low_rank=None):

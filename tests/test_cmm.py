@@ -194,6 +194,21 @@ def test_fast_method_is_a_reasonable_approximation(hand, hand_local):
         compressed_modes(hand, 6, mu, method="fast")
 
 
+def test_fast_method_default_rho_is_twice_the_kth_restricted_eigenvalue(hand, hand_local):
+    from objectives.fast import restricted_eigenbasis
+
+    _, lf = hand_local
+    mu = 0.01 * hand.n
+    res = compressed_modes(hand, 6, mu, method="fast", weighting="uniform", local_functions=lf.U,
+                           admm_options=ADMMOptions(max_iters=50))
+    lam = restricted_eigenbasis(hand.W, hand.A, lf.U, 6)[0]
+    assert res.params["rho0"] == pytest.approx(2.0 * lam[-1], rel=1e-12)
+    assert res.orthogonality <= 1e-10
+    given = compressed_modes(hand, 6, mu, method="fast", weighting="uniform", local_functions=lf.U,
+                             admm_options=ADMMOptions(rho=7.0, max_iters=5))
+    assert given.params["rho0"] == 7.0
+
+
 @pytest.mark.slow
 def test_select_mu_brackets_a_target_sparsity(knight):
     from objectives.cmm import select_mu
