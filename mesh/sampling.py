@@ -62,7 +62,9 @@ def poisson_disk_sample(
         if not 1 <= n_samples <= m.n_vertices:
             raise ValueError(f"n_samples must be in [1, {m.n_vertices}], got {n_samples}")
         radius = _radius_for(m, n_samples)
-    G = edge_graph(m) if graph is None else graph
+    # symmetric once here, so that every Dijkstra below runs as directed (scipy would
+    # symmetrise the graph again on each of the d calls with directed=False)
+    G = edge_graph(m) if graph is None else sp.csr_array(graph.maximum(graph.T))
     order = np.random.default_rng(seed).permutation(m.n_vertices)
     covered = np.zeros(m.n_vertices, dtype=bool)
     samples = []
@@ -75,7 +77,7 @@ def poisson_disk_sample(
         pos += int(np.argmax(rest))
         s = int(order[pos])
         samples.append(s)
-        d = csgraph.dijkstra(G, directed=False, indices=s, limit=radius)
+        d = csgraph.dijkstra(G, directed=True, indices=s, limit=radius)
         covered |= d < radius
         covered[s] = True
         if pos >= n:
@@ -111,11 +113,12 @@ def _limited_distances(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Triplets ``(source position, vertex, distance)`` for all Dijkstra distances ``≤ limit``.
 
-    Sources are processed in chunks so that the dense ``(chunk, n)`` block stays small.
+    ``G`` must be symmetric (``edge_graph``); it is searched as a directed graph. Sources are
+    processed in chunks so that the dense ``(chunk, n)`` block stays small.
     """
     rows, cols, vals = [], [], []
     for start in range(0, sources.size, chunk):
-        D = csgraph.dijkstra(G, directed=False, indices=sources[start : start + chunk], limit=limit)
+        D = csgraph.dijkstra(G, directed=True, indices=sources[start : start + chunk], limit=limit)
         r, c = np.nonzero(D <= limit)
         rows.append(r + start)
         cols.append(c)

@@ -33,6 +33,19 @@ def test_poisson_disk_is_separated_and_maximal(name):
     assert np.all(D.min(axis=0) < radius)  # maximal: every vertex is covered
 
 
+def test_poisson_disk_accepts_a_one_sided_graph():
+    """A user graph holding each edge in one direction only gives the same sample as edge_graph."""
+    import scipy.sparse as sp
+
+    m = shared_mesh(SMALL[0])
+    G = mesh.edge_graph(m)
+    upper = sp.csr_array(sp.triu(G))
+    assert upper.nnz * 2 == G.nnz
+    full = mesh.poisson_disk_sample(m, n_samples=40, seed=2)
+    one_sided = mesh.poisson_disk_sample(m, n_samples=40, seed=2, graph=upper)
+    np.testing.assert_array_equal(full[0], one_sided[0])
+
+
 @pytest.mark.parametrize("name", SMALL)
 def test_local_functions_partition_of_unity_full_rank(name):
     m = shared_mesh(name)
