@@ -69,3 +69,27 @@ def test_tiny_suite_writes_consistent_results(tmp_path):
     assert "hand_868.obj" in md and "no GPU" in md or meta["gpu"]
     for name in methods:
         assert f"| {name}" in md
+
+
+def test_cmm_bench_tables_for_random_starts_and_reference():
+    """The issue-4 tables: speed-up = ADMM's time / the fastest block variant's time to the same value."""
+    from bench import bench_cmm
+
+    blocks = {"shifted:cg": {"time_to_random_start_admm_best": [0.5, None], "time_to_reference_best": 0.4},
+              "shifted:lbfgs": {"time_to_random_start_admm_best": [0.25, None], "time_to_reference_best": None}}
+    row = {"mesh": "fandisk.off", "blocks": blocks,
+           "admm_random": [{"seed": 0, "best": 950.0, "time_first_within_1e-3_of_best": 1.0,
+                            "iterations_first_within_1e-3_of_best": 200},
+                           {"seed": 1, "best": 940.0, "time_first_within_1e-3_of_best": 2.0,
+                            "iterations_first_within_1e-3_of_best": 300}]}
+    assert bench_cmm._best_block(blocks, "time_to_random_start_admm_best", 0) == ("shifted:lbfgs", 0.25)
+    assert bench_cmm._best_block(blocks, "time_to_random_start_admm_best", 1) == (None, None)
+    fmt = (lambda v, f="{:.2f}": "–" if v is None else f.format(v))  # noqa: E731
+    lines = bench_cmm._markdown_other_baselines([row], fmt)
+    seed0 = next(line for line in lines if line.startswith("| fandisk.off | 0 |"))
+    assert seed0.split("|")[6:9] == [" shifted:lbfgs ", " 0.25 ", " 4.0× "]
+    seed1 = next(line for line in lines if line.startswith("| fandisk.off | 1 |"))
+    assert seed1.split("|")[6:9] == [" – ", " – ", " – "]  # no variant reached that (lower) value
+    value, t_ref = bench_cmm.REFERENCE["fandisk.off"]
+    ref = next(line for line in lines if line.startswith(f"| fandisk.off | {value:.2f} |"))
+    assert ref.split("|")[4:7] == [" shifted:cg ", " 0.40 ", f" {t_ref / 0.4:.0f}× "]
