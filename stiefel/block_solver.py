@@ -96,6 +96,8 @@ class BlockOptions:
     def __post_init__(self):
         if self.method == "lbfgs" and self.memory < 1:
             raise StiefelError(f"memory must be ≥ 1 for method='lbfgs', got {self.memory}")
+        if self.ftol_window < 1:
+            raise StiefelError(f"ftol_window must be ≥ 1, got {self.ftol_window}")
 
 
 def _core(F, manifold: GeneralizedStiefel, P, X0, monitor, opts: BlockOptions):
@@ -344,6 +346,7 @@ def minimize(
     gtol: float = 1e-6,
     xtol: float = 0.0,
     ftol: float = 0.0,
+    ftol_window: int = 20,
     max_iters: int = 1000,
     c1: float = 1e-4,
     c2: float | None = None,
@@ -375,8 +378,9 @@ def minimize(
       gtol: stop when the Riemannian gradient norm (manifold metric) is ≤ gtol.
       xtol: stop when an accepted step moves X by ≤ xtol (M-norm); 0 disables.
       ftol: stop (as converged) when the objective decreased by ≤ ftol·|F| over the last
-        20 iterations; 0 disables. For non-smooth objectives under smoothing, where the
-        gradient norm stalls above gtol.
+        ``ftol_window`` iterations; 0 disables. For non-smooth objectives under smoothing, where
+        the gradient norm stalls above gtol.
+      ftol_window: iterations over which ``ftol`` measures the decrease (≥ 1).
       max_iters: iteration limit.
       c1, c2: Armijo / curvature constants; ``c2`` defaults to 0.1 for ``"cg"`` (CG needs
         a tighter curvature condition than quasi-Newton methods: with 0.9 it stalled
@@ -411,7 +415,7 @@ def minimize(
     opts = BlockOptions(method=method, gtol=float(gtol), xtol=float(xtol), max_iters=int(max_iters), c1=float(c1),
                         c2=float(c2), ls_max_evals=int(ls_max_evals), init_step=float(init_step),
                         max_move=float(max_move), bb_gamma=float(bb_gamma), precondition=precondition,
-                        ftol=float(ftol), memory=int(memory))
+                        ftol=float(ftol), ftol_window=int(ftol_window), memory=int(memory))
     out, t_compile, t_run = run_compiled(_core, F, manifold, P, X0, monitor, opts)
     X, value, gnorm, it, status, history, stats = out
     result = Result(x=X, value=value, grad_norm=gnorm, iterations=it, status=status, history=history,

@@ -133,6 +133,24 @@ def test_ftol_stops_a_stalled_solve(problem):
     assert int(full.status) == Status.MAX_ITERS
 
 
+def test_ftol_window_sets_the_stall_test_span(problem):
+    """``ftol_window``: a loose ftol over a short window stops early; over the default 20 iterations
+    the same ftol stops later; the stop is exactly the first iterate that passes the test."""
+    W, M, F, target = problem
+    S = GeneralizedStiefel(M, K, retraction="cholesky")
+    X0 = S.random_point(jax.random.PRNGKey(6))
+    P = shifted_inverse(W, M, 0.05)
+    short = minimize(F, S, X0, gtol=1e-30, ftol=1e-3, ftol_window=3, max_iters=2000, preconditioner=P)
+    long = minimize(F, S, X0, gtol=1e-30, ftol=1e-3, max_iters=2000, preconditioner=P)
+    assert short.converged and long.converged
+    assert 3 <= int(short.iterations) < int(long.iterations)
+    v = np.asarray(short.trimmed_history()["value"])
+    passes = [i for i in range(3, len(v)) if v[i - 3] - v[i] <= 1e-3 * abs(v[i])]
+    assert passes[0] == int(short.iterations)
+    with pytest.raises(StiefelError, match="ftol_window"):
+        minimize(F, S, X0, ftol=1e-3, ftol_window=0, preconditioner=P)
+
+
 @pytest.mark.parametrize("preconditioned", [False, True])
 def test_lbfgs_needs_fewer_evaluations_than_cg(problem, preconditioned):
     """L-BFGS (two-loop, memory 8) reaches the same minimum as CG with fewer objective evaluations
