@@ -100,7 +100,11 @@ class BlockOptions:
             raise StiefelError(f"ftol_window must be ≥ 1, got {self.ftol_window}")
 
 
-def _core(F, manifold: GeneralizedStiefel, P, X0, monitor, opts: BlockOptions):
+def _core(F, manifold: GeneralizedStiefel, P, X0, monitor, opts: BlockOptions, stall=None):
+    """The solver loop. ``stall``: optional traced ``(ftol, ftol_window)`` overriding ``opts``'s values
+    (``opts.ftol > 0`` still switches the test on), so solves that differ only in them share one
+    compilation."""
+    ftol, ftol_window = (opts.ftol, opts.ftol_window) if stall is None else stall
     method, gtol, xtol, max_iters = opts.method, opts.gtol, opts.xtol, opts.max_iters
     c1, c2, ls_max_evals, init_step = opts.c1, opts.c2, opts.ls_max_evals, opts.init_step
     max_move, bb_gamma = opts.max_move, opts.bb_gamma
@@ -254,8 +258,8 @@ def _core(F, manifold: GeneralizedStiefel, P, X0, monitor, opts: BlockOptions):
         move = tau * manifold.norm(c.X, eta_used)
         conv = (gn_new <= gtol) | ((xtol > 0) & ok & (move <= xtol))
         if opts.ftol > 0:  # stalled: relative decrease over the last ftol_window iterations ≤ ftol
-            past = c.history.value[jnp.maximum(it - opts.ftol_window, 0)]
-            conv = conv | ((it >= opts.ftol_window) & ok & (past - F_new <= opts.ftol * jnp.abs(F_new)))
+            past = c.history.value[jnp.maximum(it - ftol_window, 0)]
+            conv = conv | ((it >= ftol_window) & ok & (past - F_new <= ftol * jnp.abs(F_new)))
         # a failed search along a CG / L-BFGS direction is retried along −ξ (a reset) before giving up
         retry = ~ok & ~restart if method in ("cg", "lbfgs") else jnp.zeros((), bool)
         status = jnp.where(
@@ -405,6 +409,8 @@ def minimize(
         raise StiefelError("manifold must be a stiefel.GeneralizedStiefel")
     if max_iters < 1:
         raise StiefelError(f"max_iters must be ≥ 1, got {max_iters}")
+    if ftol_window < 1:
+        raise StiefelError(f"ftol_window must be ≥ 1, got {ftol_window}")
     if precondition not in PRECONDITIONING_MODES:
         raise StiefelError(f"unknown precondition mode {precondition!r}; choose one of {PRECONDITIONING_MODES}")
     X0 = jnp.asarray(X0, dtype=manifold.dtype)
@@ -412,11 +418,13 @@ def minimize(
         manifold.check_point(X0, atol=max(1e-8, 1e3 * float(jnp.finfo(manifold.dtype).eps)))
     P = as_preconditioner(preconditioner)
     c2 = (0.9 if method == "lbfgs" else 0.1) if c2 is None else c2
+    # ftol and its window enter traced (only "on/off" is static): no recompilation when they change
     opts = BlockOptions(method=method, gtol=float(gtol), xtol=float(xtol), max_iters=int(max_iters), c1=float(c1),
                         c2=float(c2), ls_max_evals=int(ls_max_evals), init_step=float(init_step),
                         max_move=float(max_move), bb_gamma=float(bb_gamma), precondition=precondition,
-                        ftol=float(ftol), ftol_window=int(ftol_window), memory=int(memory))
-    out, t_compile, t_run = run_compiled(_core, F, manifold, P, X0, monitor, opts)
+                        ftol=1.0 if ftol > 0 else 0.0, memory=int(memory))
+    stall = (jnp.asarray(ftol, dtype=X0.dtype), jnp.asarray(ftol_window, dtype=jnp.int32))
+    out, t_compile, t_run = run_compiled(_core, F, manifold, P, X0, monitor, opts, stall)
     X, value, gnorm, it, status, history, stats = out
     result = Result(x=X, value=value, grad_norm=gnorm, iterations=it, status=status, history=history,
                     stats={k: np.asarray(v) for k, v in stats.items()}, wall_time=t_run, compile_time=t_compile)
