@@ -78,6 +78,12 @@ class ActiveSetPreconditioner:
         Rs = WX2 - self.a[:, None] * (X @ Lam)
         return (np.abs(X) < self.width) & (np.abs(Rs) <= bound)
 
+    def set_width(self, width: float) -> None:
+        """A new flat-zone width δ (a continuation stage); takes effect at the next ``refresh``.
+        The same object (and so the same compiled solver) serves every stage."""
+        self.width = float(width)
+        self.c = self.mu * self.w / (2.0 * self.width)
+
     def refresh(self, X) -> None:
         """Rebuild the pinned sets and the per-column factors at ``X`` (``(n, k)``)."""
         t0 = time.perf_counter()

@@ -345,7 +345,9 @@ def compressed_modes(
                 last = stage == len(schedule) - 1
                 stop = dict(ftol=ftol) if last else dict(ftol=max(ftol, stage_ftol), ftol_window=stage_window)
                 if P is None:
-                    active = ActiveSetPreconditioner(W, a, sigma, mu, l1_weights_np(a, weighting), s)
+                    if stage == 0:
+                        active = ActiveSetPreconditioner(W, a, sigma, mu, l1_weights_np(a, weighting), s)
+                    active.set_width(s)
                     run = _block_rounds(F, manifold, X, active, gtol=gtol, max_iters=max_iters,
                                         refresh=refresh, optimizer=optimizer, **stop)
                 else:

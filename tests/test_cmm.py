@@ -280,6 +280,14 @@ def test_active_set_preconditioner_matches_its_dense_definition(hand):
         ref[free] = np.linalg.solve(K[np.ix_(free, free)], Y[free, j])
         np.testing.assert_allclose(out[:, j], ref, rtol=1e-9, atol=1e-12)
         assert Y[:, j] @ out[:, j] > 0  # SPD
+    # a continuation stage: the same object with a new width acts as one built with that width
+    wider = 3e-3
+    pc.set_width(wider)
+    pc.refresh(X)
+    fresh = ActiveSetPreconditioner(W, a, 0.5, mu, np.full(n, 1.0 / n), wider)
+    fresh.refresh(X)
+    assert not np.array_equal(fresh.pinned(X), mask)  # the width matters here
+    np.testing.assert_allclose(pc(Y), fresh(Y), rtol=1e-12, atol=1e-15)
 
 
 def test_active_set_block_solver_agrees_with_shifted(hand):
