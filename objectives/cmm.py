@@ -224,8 +224,8 @@ def compressed_modes(
         The block solver's intermediate stages stop early (``stage_ftol``), so the stages only
         settle the arrangement of the modes, which a wide smoothing does in far fewer
         iterations; the last stage runs to ``gtol``/``ftol``. Measured (k = 10, μ = 0.01n,
-        shifted CG, ``bench/RESULTS.md``): iterations to ADMM's best 337 → 70 on camelhead,
-        203 → 70 on armadillo, 38 → 30 on fandisk, 72 → 37 on bunny; same final objective.
+        shifted CG, ``bench/RESULTS.md``): iterations to ADMM's best 337 → 67 on camelhead,
+        203 → 67 on armadillo, 38 → 29 on fandisk, 72 → 36 on bunny; same final objectives.
       stage_ftol, stage_window: the block solver's intermediate stages end once the smoothed
         objective decreased by less than ``stage_ftol`` (relative) over ``stage_window``
         iterations.
