@@ -34,7 +34,12 @@ import platform
 import time
 from pathlib import Path
 
-import jax
+# One BLAS thread, as in the other benchmarks (bench/bench_mesh.py): on this 2-core machine threaded
+# OpenBLAS's idle threads spin against the solvers (ADMM on camelhead 8.7 → 6.6 ms per iteration
+# with one thread); an explicit setting in the environment wins.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)  # benchmark script (an application), not library code
 
@@ -135,7 +140,8 @@ def markdown(meta, rows):
     out = [f"machine: {meta['machine']}; date {meta['date']}; jax {meta['jax']}, scipy {meta['scipy']}; "
            f"k = {meta['k']}, μ = {meta['mu_factor']}·n, uniform weighting, eigenbasis start; "
            f"ADMM ρ₀ = {meta['rho_factor']}·λ_k (increase-only adaptation), budget {meta['admm_time']} s; "
-           f"sparse factorisation: {meta.get('factor_backend', 'superlu')}; block smoothing stages: "
+           f"sparse factorisation: {meta.get('factor_backend', 'superlu')}; "
+           f"OPENBLAS_NUM_THREADS={meta.get('openblas_threads')}; block smoothing stages: "
            f"{meta.get('continuation') or 'the default (4)'}; command `{meta['command']}`", "",
            "| mesh | n | ADMM best | ADMM: first within 1e-3 (s) | ADMM it. / ms/it | block preconditioner:optimizer | block final "
            "| block: reaches ADMM best (s) | it. to ADMM best | speed-up | block it. | block ms/it | compile (s) "
@@ -216,6 +222,7 @@ def main(argv=None):
             "jax": jax.__version__, "scipy": scipy.__version__, "numpy": np.__version__, "k": args.k,
             "factor_backend": default_backend(), "mu_factor": args.mu_factor, "rho_factor": args.rho_factor, "admm_time": args.admm_time,
             "random_starts": args.random_starts, "continuation": args.continuation,
+            "openblas_threads": os.environ.get("OPENBLAS_NUM_THREADS"),
             "command": "python -m bench.bench_cmm " + " ".join(argv if argv is not None else __import__("sys").argv[1:])}
     Path(args.out).write_text(json.dumps({"meta": meta, "rows": rows}, indent=1))
     print(markdown(meta, rows))
