@@ -36,7 +36,7 @@ from pathlib import Path
 
 # One BLAS thread, as in the other benchmarks (bench/bench_mesh.py): on this 2-core machine threaded
 # OpenBLAS's idle threads spin against the solvers (ADMM on camelhead 8.7 → 6.6 ms per iteration
-# with one thread); an explicit setting in the environment wins.
+# with one thread, bench/RESULTS.md); an explicit setting in the environment wins.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import jax  # noqa: E402
