@@ -10,6 +10,8 @@ The mesh layer knows nothing of optimisation. Public API:
   ``DegenerateMeshError``); several components warn (``MultipleComponentsWarning``).
 * ``laplacian(m, weights=, area=, normalize_area=True) -> Laplacian`` — ``W``, ``A`` as
   scipy CSR and as JAX operators (``lap.W_op``, ``lap.A_op``); ``robust_laplacian(m)``.
+* ``laplacian_jax(V, F, area=, normalize_area=True) -> (W, A)`` — the cotangent pair as BCOO,
+  differentiable in ``V`` and jittable; ``mass_diagonal_jax``, ``weight_operator_jax``.
 * ``eigenbasis(lap, k) -> Eigenbasis(evals (k,), evecs (n, k))`` — ``Wφ = λAφ``, A-orthonormal.
 * Descriptors (§4.1): ``geodesic_distance``, ``geodists``, ``deltas``, ``normdist``,
   ``hks``, ``wks``, ``constant``, ``vertex_positions``, ``extremal_points``,
@@ -55,6 +57,7 @@ from .errors import (
 from .io import CleaningReport, Mesh, face_areas, load
 from .isometry import is_isometric, isometry_defect
 from .laplacian import AREAS, WEIGHTS, Laplacian, area_matrix, laplacian, robust_laplacian
+from .laplacian_jax import laplacian_jax, mass_diagonal_jax, weight_operator_jax
 from .ordering import inverse_permutation, permutation_matrix, permute, reorder
 from .sampling import LocalFunctions, local_functions, poisson_disk_sample
 
@@ -91,8 +94,10 @@ __all__ = [
     "isometry_defect",
     "landmarks",
     "laplacian",
+    "laplacian_jax",
     "load",
     "local_functions",
+    "mass_diagonal_jax",
     "normdist",
     "permutation_matrix",
     "permute",
@@ -102,5 +107,6 @@ __all__ = [
     "scaled_to_unit_area",
     "vertex_positions",
     "wks",
+    "weight_operator_jax",
     "wks_energies",
 ]

@@ -5,8 +5,14 @@ Public API (MATH.md §1–3):
 * ``GeneralizedStiefel(M, k, metric=..., retraction=...)`` — the manifold.
 * ``SequentialConstraint`` — ``{x : ΦᵀMx = 0, xᵀMx = 1}`` for column-by-column solves.
 * ``strong_wolfe``, ``along_curve``, ``LineSearchStatus`` — the line search.
-* ``minimize`` (block solver) and ``minimize_sequential`` (thesis Algorithm 6);
-  ``solve_block``, the block solver as a pure jittable/vmappable function.
+* ``RiemannianCG``, ``RiemannianLBFGS``, ``RiemannianBB`` — ``optimistix`` minimisers:
+  ``optx.minimise(fn, stiefel.RiemannianCG(S, rtol, atol), X0, args,
+  adjoint=stiefel.RiemannianImplicitAdjoint())``.
+* ``minimize`` (block solver, the convenience entry point running the same minimisers) and
+  ``minimize_sequential`` (thesis Algorithm 6); ``solve_block``, the block solver as a pure
+  jittable/vmappable function.
+* ``RiemannianImplicitAdjoint`` — derivatives of solutions by the implicit function theorem
+  (MATH.md §9); ``riemannian_hessian``, ``hessian_operator`` — the Riemannian Hessian.
 * ``Result``, ``SequentialResult``, ``Status``, ``History`` — solver outcomes.
 * ``as_operator``, ``shifted_inverse`` — SPD operators and preconditioners.
 * ``stiefel.sharding`` — ``row_mesh``, ``shard_rows``, ``solve_sharded``: the block solver with
@@ -22,8 +28,11 @@ context works for diagonal and dense M, but sparse solves run as host
 callbacks, which see only the global flag.)
 """
 
-from .block_solver import METHODS, BlockOptions, minimize
+from .block_solver import METHODS, BlockOptions, minimize, solver_for
 from .block_solver import solve as solve_block
+from .hessian import hessian_operator, riemannian_hessian
+from .implicit import RiemannianImplicitAdjoint, riemannian_residual, tangent_solve
+from .minimisers import RiemannianBB, RiemannianCG, RiemannianLBFGS
 from .errors import NotSPDError, OffManifoldError, ShapeError, SolverError, StiefelError
 from .linesearch import LineSearchResult, LineSearchStatus, along_curve, strong_wolfe
 from .manifold import GeneralizedStiefel, skew, sym

@@ -112,6 +112,12 @@ class GeneralizedStiefel(eqx.Module):
             return MinvG - X @ (G.T @ X)
         return MinvG - X @ sym(X.T @ G)
 
+    def ehess_to_rhess(self, X: Point, G: Point, H: Point, xi: Point) -> Point:
+        """Riemannian Hessian ``P_X(M⁻¹H − ξ sym(XᵀG))`` from the Euclidean gradient ``G`` and the
+        Euclidean Hessian action ``H = ∇²F(X)[ξ]`` at tangent ``ξ`` (MATH.md §9; both metrics,
+        see ``stiefel.hessian``)."""
+        return self.proj(X, self.op.solve(H) - xi @ sym(X.T @ G))
+
     def retract(self, X: Point, Z: Point) -> Point:
         """``R_X(Z)`` with the manifold's retraction."""
         return RETRACTIONS[self.retraction](self.op, X, Z)
@@ -166,4 +172,5 @@ class GeneralizedStiefel(eqx.Module):
     projection = proj
     inner_product = inner
     euclidean_to_riemannian_gradient = egrad_to_rgrad
+    euclidean_to_riemannian_hessian = ehess_to_rhess
     retraction_map = retract

@@ -270,7 +270,9 @@ def as_operator(M, *, check: bool = True, factor: bool = True, dtype=None) -> Li
 
     Args:
       M: a 1-D array (the diagonal), a dense ``(n, n)`` array, a
-        ``scipy.sparse`` matrix, or a ``LinearOperator`` (returned unchanged).
+        ``scipy.sparse`` matrix, or a ``LinearOperator`` (returned unchanged). A traced JAX array
+        (inside ``jax.grad``/``jit``) gives a diagonal or dense operator without host checks, so
+        solutions can be differentiated with respect to M.
       check: validate symmetry and positive definiteness (raises ``NotSPDError``).
       factor: for sparse M, factor it once so that ``solve`` works.
       dtype: floating dtype of the stored values (default: float64 if x64 is on).
@@ -278,6 +280,12 @@ def as_operator(M, *, check: bool = True, factor: bool = True, dtype=None) -> Li
     if isinstance(M, LinearOperator):
         return M
     dtype = np.dtype(dtype or (jnp.float64 if jax.config.jax_enable_x64 else jnp.float32))
+    if isinstance(M, jax.core.Tracer):  # a traced M (e.g. differentiated): no host checks, no host factorisation
+        if M.ndim == 1:
+            return DiagonalOperator(M.astype(dtype))
+        if M.ndim == 2 and M.shape[0] == M.shape[1]:
+            return DenseOperator(M.astype(dtype), jnp.linalg.cholesky(0.5 * (M + M.T)).astype(dtype))
+        raise ShapeError(f"a traced M must be 1-D (diagonal) or square 2-D, got shape {M.shape}")
     if sp.issparse(M):
         if M.ndim != 2 or M.shape[0] != M.shape[1]:
             raise ShapeError(f"M must be square, got shape {M.shape}")

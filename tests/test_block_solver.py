@@ -105,7 +105,9 @@ def test_pure_solver_vmaps_over_starts(problem):
     W, M, F, target = problem
     S = GeneralizedStiefel(M, K, retraction="cholesky")
     X0s = jnp.stack([S.random_point(k) for k in jax.random.split(jax.random.PRNGKey(5), 3)])
-    opts = BlockOptions(method="cg", gtol=1e-8, max_iters=3000, c2=0.1)
+    # L-BFGS: unpreconditioned CG stalls near 1e-8 on this grid problem, and batched and single runs
+    # (which round differently) then stall for different numbers of iterations
+    opts = BlockOptions(method="lbfgs", gtol=1e-8, max_iters=3000, c2=0.9)
     batched = jax.jit(jax.vmap(lambda X0: solve_block(F, S, X0, opts)))(X0s)
     for i in range(3):
         single = solve_block(F, S, X0s[i], opts)

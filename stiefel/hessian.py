@@ -1,0 +1,48 @@
+"""The Riemannian Hessian on ``S_M = {XᵀMX = I}`` (MATH.md §9).
+
+For ``F: R^{n×k} → R`` with Euclidean gradient ``G = ∇F(X)`` and Hessian action
+``H[ξ] = ∇²F(X)[ξ]`` (a ``jax.jvp`` of ``jax.grad F``), the Riemannian Hessian of the
+M-weighted metric ``⟨ξ, η⟩ = tr(ξᵀMη)`` is
+
+    ``Hess F(X)[ξ] = P_X(M⁻¹ H[ξ] − ξ sym(XᵀG))``,   ``P_X(Z) = Z − X sym(XᵀMZ)``,
+
+for tangent ``ξ`` (the projection of the ambient derivative of the gradient field: the
+Levi-Civita connection of the embedded metric). It is self-adjoint in ``⟨·,·⟩``. For the
+canonical metric the same operator is returned: at a critical point the Hessian does not
+depend on the metric, and MATH.md §9 prescribes this form for second-order work.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable
+
+import jax
+from jaxtyping import Array, Float
+
+from .manifold import GeneralizedStiefel, sym
+
+__all__ = ["riemannian_hessian", "hessian_operator"]
+
+
+def _euclidean(fn: Callable, args: Any):
+    return (lambda X: fn(X)) if args is None else (lambda X: fn(X, args))
+
+
+def riemannian_hessian(fn: Callable, manifold: GeneralizedStiefel, X: Float[Array, "n k"],
+                       xi: Float[Array, "n k"], args: Any = None) -> Float[Array, "n k"]:
+    """``Hess F(X)[ξ]`` for tangent ``ξ`` (module docstring); ``fn(X)`` or ``fn(X, args)`` → scalar.
+
+    Costs one forward-over-reverse product (``jax.jvp`` of ``jax.grad``), one ``M⁻¹`` solve
+    and one product with M.
+    """
+    G, H = jax.jvp(jax.grad(_euclidean(fn, args)), (X,), (xi,))
+    return manifold.ehess_to_rhess(X, G, H, xi)
+
+
+def hessian_operator(fn: Callable, manifold: GeneralizedStiefel, X: Float[Array, "n k"],
+                     args: Any = None) -> Callable[[Float[Array, "n k"]], Float[Array, "n k"]]:
+    """``ξ ↦ Hess F(X)[ξ]`` with the gradient linearised once (``jax.linearize``): repeated
+    products (e.g. inside CG) cost one linearised Hessian action each."""
+    G, hvp = jax.linearize(jax.grad(_euclidean(fn, args)), X)
+    S = sym(X.T @ G)
+    return lambda xi: manifold.proj(X, manifold.op.solve(hvp(xi)) - xi @ S)
