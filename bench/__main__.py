@@ -27,6 +27,7 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
     "bases": ("bench.bench_bases", "bases and functional maps (issue 5)"),
     "batch": ("bench.bench_batch", "batched solves (issue 7, batching)"),
     "precision": ("bench.bench_precision", "float32 vs float64 (issue 7, precision)"),
+    "autodiff": ("bench.bench_autodiff", "implicit derivatives through CMM solves: backward vs forward (issue 16)"),
 }
 
 
