@@ -6,7 +6,7 @@ all methods started from the first k eigenfunctions:
 * ADMM (``objectives.admm``, exact A-weighted form, ρ₀ = ``rho_factor``·λ_k with increase-only
   adaptation, E-step by ``stiefel.sparse_factor.SymmetricFactor``) for a time budget: its best
   true objective and the time at which it first came within 1e-3 (relative) of that best;
-* the block manifold solver (``compressed_modes(method="block")``: Huber smoothing with the
+* the block manifold solver (``compressed_modes(solver=BlockCMM(...))``: Huber smoothing with the
   library's default continuation, δ = 0.1 → 1e-3 in 4 stages (``--continuation 1``: none),
   Cholesky retraction) in each ``preconditioner:optimizer`` variant of ``--variants``
   (preconditioners ``(W + σA)⁻¹``, σ = λ_{k−1}, "shifted" and "active_set",
@@ -47,8 +47,8 @@ import numpy as np  # noqa: E402
 import scipy  # noqa: E402
 
 import mesh  # noqa: E402
-from objectives.admm import ADMMOptions  # noqa: E402
 from objectives.cmm import compressed_modes, first_eigenpairs  # noqa: E402
+from objectives.cmm_solvers import ADMMCMM, BlockCMM, SequentialCMM  # noqa: E402
 from stiefel.sparse_factor import default_backend  # noqa: E402
 
 MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
@@ -69,9 +69,9 @@ def _first_index_within(values, target, rel=1e-3):
 
 def _admm_run(lap, k, mu, rho, budget, start="eigen", seed=0):
     """One ADMM run (increase-only ρ from ``rho``): best objective, time first within 1e-3 of it, ..."""
-    admm = compressed_modes(lap, k, mu, method="admm", weighting="uniform", start=start, seed=seed,
-                            admm_options=ADMMOptions(rho=rho, adapt_rho="increase", max_iters=10**6,
-                                                     time_limit=budget))
+    admm = compressed_modes(lap, k, mu, solver=ADMMCMM(rho=rho, adapt_rho="increase", max_iters=10**6,
+                                                       time_limit=budget),
+                            weighting="uniform", start=start, seed=seed)
     h = admm.history
     best = float(np.min(h["objective"]))
     return {"start": start, "seed": seed, "best": best, "final": admm.objective, "iterations": admm.iterations,
@@ -103,9 +103,10 @@ def run_mesh(name, args):
     t_admm = row["admm"]["time_first_within_1e-3_of_best"]
     for variant in args.variants:
         pc, opt = variant.split(":")
-        blk = compressed_modes(lap, k, mu, method="block", weighting="uniform", gtol=args.gtol,
-                               max_iters=args.max_iters, preconditioner=pc, refresh=args.refresh, optimizer=opt,
-                               continuation=args.continuation)
+        stages = {} if args.continuation is None else {"continuation": args.continuation}
+        solver = BlockCMM(gtol=args.gtol, max_iters=args.max_iters, preconditioner=pc, refresh=args.refresh,
+                          optimizer=opt, **stages)
+        blk = compressed_modes(lap, k, mu, solver=solver, weighting="uniform")
         hb = blk.history
         b = {"preconditioner": pc, "optimizer": opt, "final": blk.objective, "iterations": blk.iterations, "status": blk.status,
              "orthogonality": blk.orthogonality, "wall_time": blk.wall_time, "compile_time": blk.compile_time,
@@ -127,8 +128,8 @@ def run_mesh(name, args):
     row["speedup_vs_admm"] = row["block"]["speedup_vs_admm"]
 
     if args.sequential:
-        seq = compressed_modes(lap, k, mu, method="sequential", weighting="uniform", gtol=args.gtol,
-                               max_iters=args.seq_iters)
+        seq = compressed_modes(lap, k, mu, solver=SequentialCMM(gtol=args.gtol, max_iters=args.seq_iters),
+                               weighting="uniform")
         row["sequential"] = {"final": seq.objective, "iterations": seq.iterations, "status": seq.status,
                              "wall_time": seq.wall_time, "compile_time": seq.compile_time,
                              "orthogonality": seq.orthogonality}

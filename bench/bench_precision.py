@@ -35,9 +35,10 @@ import numpy as np  # noqa: E402
 import mesh  # noqa: E402
 from bench.environment import run_meta  # noqa: E402
 import stiefel  # noqa: E402
-from objectives.admm import ADMMOptions, l1_weights_np  # noqa: E402
+from objectives.admm import l1_weights_np  # noqa: E402
 from objectives.batch import cmm_batch, cmm_problem, default_options  # noqa: E402
 from objectives.cmm import compressed_modes  # noqa: E402
+from objectives.cmm_solvers import ADMMCMM  # noqa: E402
 
 MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
 DTYPES = {"float64": jnp.float64, "float32": jnp.float32}
@@ -81,8 +82,8 @@ def run_mesh(name, args):
     n, k = lap.n, args.k
     mu = args.mu_factor * n
     rows = []
-    admm = compressed_modes(lap, k, mu, method="admm", weighting="uniform",
-                            admm_options=ADMMOptions(adapt_rho="increase", max_iters=10**6, time_limit=args.admm_time))
+    solver = ADMMCMM(adapt_rho="increase", max_iters=10**6, time_limit=args.admm_time)
+    admm = compressed_modes(lap, k, mu, solver=solver, weighting="uniform")
     ref = {"solver": "admm", "dtype": "float64", "objective": admm.objective, "orthogonality": admm.orthogonality,
            "status": admm.status, "iterations": admm.iterations, "wall_time": admm.wall_time, "compile_time": 0.0}
     rows.append(ref)

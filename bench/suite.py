@@ -9,9 +9,9 @@ the restricted eigenbasis, Algorithm 7):
   default —, the same factorisation for all): block Riemannian CG with the Cholesky, Cayley
   and polar retractions, block L-BFGS and Barzilai–Borwein (Cholesky), block CG with the
   active-set preconditioner, and the thesis's sequential solver
-  (Algorithm 6, ``compressed_modes(method="sequential")``);
-* the ADMM baseline (``compressed_modes(method="admm")``, ρ₀ = 3λ_k, increase-only);
-* the fast approximation (``compressed_modes(method="fast")``, ``--fast-samples`` local functions);
+  (Algorithm 6, ``compressed_modes(solver=SequentialCMM(...))``);
+* the ADMM baseline (``compressed_modes(solver=ADMMCMM(...))``, ρ₀ = 3λ_k, increase-only);
+* the fast approximation (``compressed_modes(solver=FastCMM(U, ...))``, ``--fast-samples`` local functions);
 * at μ = 0: ``scipy.sparse.linalg.eigsh`` shift-invert (reference) and block CG (Cholesky) from a
   random start, whose objective is compared with the sum of the k eigenvalues.
 
@@ -63,8 +63,9 @@ import scipy  # noqa: E402
 import mesh  # noqa: E402
 import stiefel  # noqa: E402
 from stiefel.sparse_factor import default_backend  # noqa: E402
-from objectives.admm import ADMMOptions, orthonormalize  # noqa: E402
+from objectives.admm import orthonormalize  # noqa: E402
 from objectives.cmm import compressed_modes, first_eigenpairs  # noqa: E402
+from objectives.cmm_solvers import ADMMCMM, BlockCMM, FastCMM, SequentialCMM  # noqa: E402
 from objectives.energies import cmm_energy  # noqa: E402
 
 MESHES = ROOT.parent / "shared" / "meshes"
@@ -168,9 +169,9 @@ def run_block_mu0(pb: Problem) -> dict:
 
 def run_block_active_set(pb: Problem) -> dict:
     """Block CG / Cholesky with the active-set preconditioner (``objectives.active_set``), via ``compressed_modes``."""
-    res = compressed_modes((pb.W, pb.lap.A), pb.k, pb.mu, method="block", weighting="uniform", smoothing="f6",
-                           gtol=pb.args.gtol, ftol=pb.args.ftol, max_iters=pb.args.max_iters,
-                           preconditioner="active_set", preconditioner_shift=pb.sigma)
+    solver = BlockCMM(smoothing="f6", gtol=pb.args.gtol, ftol=pb.args.ftol, max_iters=pb.args.max_iters,
+                      preconditioner="active_set", preconditioner_shift=pb.sigma)
+    res = compressed_modes((pb.W, pb.lap.A), pb.k, pb.mu, solver=solver, weighting="uniform")
     return _from_cmm(pb, res)
 
 
@@ -193,28 +194,28 @@ def _from_cmm(pb: Problem, res, curve=None) -> dict:
 
 
 def run_sequential(pb: Problem) -> dict:
-    res = compressed_modes((pb.W, pb.lap.A), pb.k, pb.mu, method="sequential", weighting="uniform",
-                           smoothing="f6", gtol=pb.args.gtol, max_iters=pb.args.seq_iters,
+    solver = SequentialCMM(smoothing="f6", gtol=pb.args.gtol, max_iters=pb.args.seq_iters,
                            preconditioner_shift=pb.sigma)
+    res = compressed_modes((pb.W, pb.lap.A), pb.k, pb.mu, solver=solver, weighting="uniform")
     # the sequential solver's history is per column: only the final point is on the manifold
     return _from_cmm(pb, res, curve=([res.wall_time], [res.objective]))
 
 
-def _admm_options(pb: Problem) -> ADMMOptions:
-    return ADMMOptions(rho=pb.args.rho_factor * float(pb.evals[-1]), adapt_rho="increase",
-                       max_iters=pb.args.admm_iters, time_limit=pb.args.admm_time)
+def _admm_options(pb: Problem) -> dict:
+    """The ADMM solvers' options: ρ₀ = ``rho_factor``·λ_{k−1}, increase-only, iteration and time caps."""
+    return dict(rho=pb.args.rho_factor * float(pb.evals[-1]), adapt_rho="increase",
+                max_iters=pb.args.admm_iters, time_limit=pb.args.admm_time)
 
 
 def run_admm(pb: Problem) -> dict:
-    res = compressed_modes((pb.W, pb.lap.A), pb.k, pb.mu, method="admm", weighting="uniform",
-                           admm_options=_admm_options(pb))
+    res = compressed_modes((pb.W, pb.lap.A), pb.k, pb.mu, solver=ADMMCMM(**_admm_options(pb)), weighting="uniform")
     return _from_cmm(pb, res)
 
 
 def run_fast(pb: Problem) -> dict:
     U = pb.local_functions()
-    res = compressed_modes((pb.W, pb.lap.A), pb.k, pb.mu, method="fast", weighting="uniform", local_functions=U,
-                           admm_options=_admm_options(pb))
+    res = compressed_modes((pb.W, pb.lap.A), pb.k, pb.mu, solver=FastCMM(U, **_admm_options(pb)),
+                           weighting="uniform")
     out = _from_cmm(pb, res)
     out["d"] = int(U.shape[1])
     return out

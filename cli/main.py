@@ -14,11 +14,17 @@ line per stage (none with ``--quiet``); ``--json`` prints exactly one JSON objec
 ``stiefel: error: …`` on stderr: exit code 2 for bad arguments, 1 for bad input
 (missing file, non-manifold mesh, …).
 
+``--method`` picks the solver object of ``objectives.cmm_solvers`` (``block`` →
+``BlockCMM``, ``sequential`` → ``SequentialCMM``, ``admm`` → ``ADMMCMM``,
+``admm_sequential`` → ``SequentialADMMCMM``, ``fast`` → ``FastCMM``); ``--smoothing``,
+``--gtol`` and ``--max-iters`` set the manifold solvers' options (the ADMM solvers keep
+their own defaults), ``--samples`` the local functions of ``fast``.
+
 Partial results: for ``--method sequential`` the finished columns are saved to
-``DIR/modes.partial.npz`` as they complete *if* ``objectives.cmm.compressed_modes``
-accepts a ``callback=`` (passed through to ``stiefel.minimize_sequential``); it
-does not yet, so today every method writes its modes when the solve has finished
-(``summary.json`` says which applied).
+``DIR/modes.partial.npz`` as they complete (``compressed_modes(callback=)``, passed
+through to ``stiefel.minimize_sequential``) and removed once the modes are written; the
+other methods write their modes when the solve has finished (``summary.json`` says which
+applied).
 
 This is an application: ``main`` switches JAX to float64 (``jax_enable_x64``);
 the library modules never touch JAX's global configuration.
@@ -41,7 +47,7 @@ from .outputs import MuSpec, PartialColumns, parse_mu, stderr_line, to_jsonable,
 __all__ = ["main", "build_parser", "CLIError"]
 
 PROG = "stiefel"
-METHODS = ("block", "sequential", "admm", "admm_sequential", "fast")
+METHODS = ("block", "sequential", "admm", "admm_sequential", "fast")  # objectives.cmm_solvers.SOLVERS
 SMOOTHINGS = tuple(f"f{i}" for i in range(10))
 
 
@@ -218,22 +224,22 @@ def _cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     say(f"mesh {mesh_info['source']}: n = {m.n_vertices} vertices, {m.n_faces} faces")
     out = _out_dir(args)
     extra: dict[str, Any] = {}
+    U = None
     if args.method == "fast":
         d = args.samples or max(10 * args.k, m.n_vertices // 10)
         d = min(d, m.n_vertices)
         t = time.perf_counter()
-        extra["local_functions"] = mesh.local_functions(m, n_samples=d).U
+        U = mesh.local_functions(m, n_samples=d).U
         timings["local_functions"] = time.perf_counter() - t
         say(f"local functions: d = {d}")
+    solver = _solver(args, args.method, args.smoothing, local_functions=U)
     say(f"solving: k = {args.k}, mu = {mu:.6g} ({args.mu.text}), method = {args.method}, "
         f"smoothing = {args.smoothing}, weighting = {args.weighting}")
     partial = _partial_writer(args.method, compressed_modes, out, say)
     if partial is not None:
         extra["callback"] = partial
     t = time.perf_counter()
-    res = compressed_modes(lap, args.k, mu, method=args.method, smoothing=args.smoothing,
-                           weighting=args.weighting, seed=args.seed, gtol=args.gtol, max_iters=args.max_iters,
-                           **extra)
+    res = compressed_modes(lap, args.k, mu, solver=solver, weighting=args.weighting, seed=args.seed, **extra)
     timings["solve_total"] = time.perf_counter() - t
     timings["solve_wall"] = float(res.wall_time)
     timings["compile"] = float(res.compile_time)
@@ -271,8 +277,20 @@ def _cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     return 0
 
 
-_PARTIAL_NOTE = ("modes are written when the solve finishes (objectives.cmm.compressed_modes has no "
-                 "per-column callback to pass through)")
+_PARTIAL_NOTE = ("modes are written when the solve finishes (only --method sequential reports its columns "
+                 "as they complete)")
+
+
+def _solver(args: argparse.Namespace, method: str, smoothing: str, *, local_functions=None):
+    """The ``objectives.cmm_solvers`` object for ``--method`` with the flags that apply to it: the manifold
+    solvers take ``--smoothing``, ``--gtol`` and ``--max-iters``; ADMM keeps its defaults; fast takes U."""
+    from objectives.cmm_solvers import SOLVERS, FastCMM
+
+    if method in ("block", "sequential"):
+        return SOLVERS[method](smoothing=smoothing, gtol=args.gtol, max_iters=args.max_iters)
+    if method == "fast":
+        return FastCMM(local_functions)
+    return SOLVERS[method]()
 
 
 def _partial_writer(method: str, solve, out: Path, say) -> PartialColumns | None:
@@ -335,8 +353,8 @@ def _cmd_compare(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         row: dict[str, Any] = {"smoothing": name, "c1_at_zero": smoothings.info(name).c1_at_zero}
         t = time.perf_counter()
         try:
-            r = compressed_modes(lap, args.k, mu, method=args.method, smoothing=name, weighting=args.weighting,
-                                 seed=args.seed, start="eigen", gtol=args.gtol, max_iters=args.max_iters)
+            r = compressed_modes(lap, args.k, mu, solver=_solver(args, args.method, name), weighting=args.weighting,
+                                 seed=args.seed, start="eigen")
             row.update(status=r.status, objective=r.objective, dirichlet=r.dirichlet, l1=r.l1,
                        **{"sparsity_1e-3": r.sparsity["1e-3"]}, orthogonality=r.orthogonality,
                        iterations=r.iterations, time_s=time.perf_counter() - t)

@@ -4,9 +4,10 @@
   (``f0 … f9``, ``get``, ``info``, ``NAMES``).
 * ``objectives.energies`` — Dirichlet energy, weighted ℓ1 terms, the smoothed
   compressed-manifold-mode energy ``CMMEnergy`` and compressed eigenvalues.
-* ``objectives.cmm`` — ``compressed_modes`` (manifold solvers, ADMM, fast approximation)
-  and ``select_mu``; ``objectives.admm`` (Algorithm 3) and ``objectives.fast``
-  (Algorithms 7–8).
+* ``objectives.cmm`` — ``compressed_modes(lap, k, mu, solver=...)`` and ``select_mu``;
+  ``objectives.cmm_solvers`` — one immutable solver object per method: ``BlockCMM``,
+  ``SequentialCMM``, ``ADMMCMM`` (exact / thesis form), ``SequentialADMMCMM``, ``FastCMM``;
+  ``objectives.admm`` (Algorithm 3) and ``objectives.fast`` (Algorithms 7–8).
 * ``objectives.batch`` — ``cmm_batch``: a batch of CMM solves (μ, ε/δ, starts) under
   ``jax.vmap``, or as a loop of the same compiled solver.
 * ``objectives.bases`` — generalised manifold harmonics (GLMH), LMHs, Hamiltonian
@@ -19,9 +20,10 @@ This package joins ``stiefel`` (operators) and the mesh quantities (W, A), but
 imports nothing from ``mesh``: callers pass the matrices.
 """
 
-from . import admm, bases, batch, cmm, evaluation, fast, fmaps, smoothings
+from . import admm, bases, batch, cmm, cmm_solvers, evaluation, fast, fmaps, smoothings
 from .batch import BatchResult, cmm_batch
 from .cmm import CMMResult, compressed_modes, select_mu
+from .cmm_solvers import ADMMCMM, BlockCMM, CMMSolver, FastCMM, SequentialADMMCMM, SequentialCMM, SolverOptionError
 from .energies import (
     CMMEnergy,
     Weighting,
@@ -48,6 +50,14 @@ __all__ = [
     "CMMResult",
     "compressed_modes",
     "select_mu",
+    "cmm_solvers",
+    "CMMSolver",
+    "BlockCMM",
+    "SequentialCMM",
+    "ADMMCMM",
+    "SequentialADMMCMM",
+    "FastCMM",
+    "SolverOptionError",
     "smoothings",
     "Smoothing",
     "SMOOTHING_NAMES",

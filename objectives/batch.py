@@ -47,7 +47,7 @@ PRECONDITIONERS = ("shifted", "jacobi", None)
 
 
 def default_options(**overrides) -> stiefel.BlockOptions:
-    """``BlockOptions`` as ``compressed_modes(method="block")`` uses them (CG, c2 = 0.1, ftol = 1e-7)."""
+    """``BlockOptions`` as ``compressed_modes(solver=BlockCMM())`` uses them (CG, c2 = 0.1, ftol = 1e-7)."""
     base = dict(method="cg", c2=0.1, gtol=1e-6, ftol=1e-7, max_iters=5000)
     base.update(overrides)
     return stiefel.BlockOptions(**base)

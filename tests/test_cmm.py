@@ -9,6 +9,7 @@ import scipy.sparse as sp
 import mesh
 from objectives.admm import ADMMOptions, admm
 from objectives.cmm import compressed_modes, first_eigenpairs
+from objectives.cmm_solvers import ADMMCMM, BlockCMM, FastCMM, SequentialCMM, SolverOptionError
 
 MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
 pytestmark = pytest.mark.skipif(not MESHES.is_dir(), reason="shared meshes not available")
@@ -33,9 +34,9 @@ def test_cross_method_agreement_on_hand(hand):
     """hand_868, k = 6, μ = 0.01·n, uniform weighting: the manifold solver is within 1% of ADMM (or lower)."""
     n = hand.n
     mu = 0.01 * n
-    ref = compressed_modes(hand, 6, mu, method="admm", weighting="uniform",
-                           admm_options=ADMMOptions(rho=100.0, adapt_rho=False, max_iters=3000))
-    res = compressed_modes(hand, 6, mu, method="block", weighting="uniform")
+    ref = compressed_modes(hand, 6, mu, solver=ADMMCMM(rho=100.0, adapt_rho=False, max_iters=3000),
+                           weighting="uniform")
+    res = compressed_modes(hand, 6, mu, solver=BlockCMM(), weighting="uniform")
     assert res.objective <= 1.01 * ref.objective, (res.objective, ref.objective)
     for r in (ref, res):
         assert r.orthogonality <= 1e-10
@@ -45,13 +46,13 @@ def test_cross_method_agreement_on_hand(hand):
     assert res.sparsity["1e-3"] > 0.05
 
 
-@pytest.mark.parametrize("method", ["block", "sequential"])
-def test_mu_zero_gives_eigenfunctions(knight, method):
+@pytest.mark.parametrize("solver", [BlockCMM, SequentialCMM])
+def test_mu_zero_gives_eigenfunctions(knight, solver):
     """μ = 0: the modes span the first k Laplacian eigenfunctions (subspace angle ≤ 1e-6)."""
     k = 5
     W, a = knight.W, knight.A.diagonal()
     _, evecs = first_eigenpairs(W, a, k)
-    res = compressed_modes(knight, k, 0.0, method=method, start="random", gtol=1e-9, continuation=1)
+    res = compressed_modes(knight, k, 0.0, solver=solver(gtol=1e-9, continuation=1), start="random")
     cos = principal_cosines(knight, evecs, res.modes)
     assert np.arccos(np.clip(cos.min(), -1, 1)) <= 1e-6
     assert res.orthogonality <= 1e-10
@@ -60,8 +61,7 @@ def test_mu_zero_gives_eigenfunctions(knight, method):
 def test_admm_mu_zero_gives_eigenfunctions(knight):
     k = 5
     _, evecs = first_eigenpairs(knight.W, knight.A.diagonal(), k)
-    res = compressed_modes(knight, k, 0.0, method="admm", start="random",
-                           admm_options=ADMMOptions(rho=50.0, adapt_rho=False, max_iters=4000))
+    res = compressed_modes(knight, k, 0.0, solver=ADMMCMM(rho=50.0, adapt_rho=False, max_iters=4000), start="random")
     cos = principal_cosines(knight, evecs, res.modes)
     assert np.arccos(np.clip(cos.min(), -1, 1)) <= 1e-3
 
@@ -74,8 +74,9 @@ def test_isometry_permuted_mesh_gives_permuted_modes(knight):
     k, mu = 4, 0.01 * knight.n
     X0 = np.random.default_rng(1).standard_normal((knight.n, k))
     # permute(m, perm): new vertex i is old vertex perm[i]
-    res = compressed_modes(knight, k, mu, start=X0, gtol=1e-9, continuation=1, eps=1e-2, delta=1e-2)
-    res_p = compressed_modes(lap_p, k, mu, start=X0[perm], gtol=1e-9, continuation=1, eps=1e-2, delta=1e-2)
+    solver = BlockCMM(gtol=1e-9, continuation=1, eps=1e-2, delta=1e-2)
+    res = compressed_modes(knight, k, mu, solver=solver, start=X0)
+    res_p = compressed_modes(lap_p, k, mu, solver=solver, start=X0[perm])
     assert abs(res.objective - res_p.objective) <= 1e-8 * res.objective
     np.testing.assert_allclose(res_p.modes, res.modes[perm], atol=1e-5)
 
@@ -95,26 +96,33 @@ def test_admm_variants_and_history(hand):
 
 
 def test_bad_parameters(hand):
-    with pytest.raises(ValueError, match="unknown method"):
-        compressed_modes(hand, 3, 1.0, method="newton")
+    """Problem-level checks in ``compressed_modes``; the solvers' own options in tests/test_cmm_solvers.py."""
+    with pytest.raises(SolverOptionError, match="solver must be a CMM solver object"):
+        compressed_modes(hand, 3, 1.0, solver="newton")
     with pytest.raises(ValueError, match="k must"):
         compressed_modes(hand, hand.n + 1, 1.0)
     with pytest.raises(ValueError, match="mu"):
         compressed_modes(hand, 3, -1.0)
     with pytest.raises(ValueError, match="diagonal"):
         compressed_modes((hand.W, hand.A + sp.eye(hand.n, k=1) * 1e-6), 3, 1.0)
-    with pytest.raises(ValueError, match="unknown preconditioner"):
-        compressed_modes(hand, 3, 1.0, preconditioner="ilu")
-    with pytest.raises(ValueError, match="needs method='block'"):
-        compressed_modes(hand, 3, 1.0, method="sequential", preconditioner="active_set")
-    with pytest.raises(ValueError, match="unknown optimizer"):
-        compressed_modes(hand, 3, 1.0, optimizer="newton")
-    with pytest.raises(ValueError, match="needs method='block'"):
-        compressed_modes(hand, 3, 1.0, method="sequential", optimizer="lbfgs")
-    with pytest.raises(ValueError, match="continuation and stage_window"):
-        compressed_modes(hand, 3, 1.0, continuation=0)
-    with pytest.raises(ValueError, match="continuation and stage_window"):
-        compressed_modes(hand, 3, 1.0, stage_window=0)
+    with pytest.raises(ValueError, match="unknown weighting"):
+        compressed_modes(hand, 3, 1.0, weighting="cotangent")
+    with pytest.raises(ValueError, match="unknown start"):
+        compressed_modes(hand, 3, 1.0, start="zeros")
+    with pytest.raises(ValueError, match="start must have shape"):
+        compressed_modes(hand, 3, 1.0, start=np.zeros((hand.n, 2)))
+    with pytest.raises(SolverOptionError, match="unknown preconditioner"):
+        BlockCMM(preconditioner="ilu")
+    with pytest.raises(TypeError, match="preconditioner"):  # the sequential solver has no such option
+        SequentialCMM(preconditioner="active_set")
+    with pytest.raises(SolverOptionError, match="unknown optimizer"):
+        BlockCMM(optimizer="newton")
+    with pytest.raises(TypeError, match="optimizer"):
+        SequentialCMM(optimizer="lbfgs")
+    with pytest.raises(SolverOptionError, match="continuation"):
+        BlockCMM(continuation=0)
+    with pytest.raises(SolverOptionError, match="stage_window"):
+        BlockCMM(stage_window=0)
 
 
 def test_block_continuation_stops_intermediate_stages_early(hand):
@@ -123,9 +131,9 @@ def test_block_continuation_stops_intermediate_stages_early(hand):
     single-stage solve (hand_868, k = 6, μ = 0.01n: 95 iterations against 116 single-stage
     and 122 with the intermediate stages run to the tight tolerance)."""
     mu = 0.01 * hand.n
-    one = compressed_modes(hand, 6, mu, weighting="uniform", continuation=1)
+    one = compressed_modes(hand, 6, mu, solver=BlockCMM(continuation=1), weighting="uniform")
     res = compressed_modes(hand, 6, mu, weighting="uniform")
-    full_stages = compressed_modes(hand, 6, mu, weighting="uniform", stage_ftol=1e-9)
+    full_stages = compressed_modes(hand, 6, mu, solver=BlockCMM(stage_ftol=1e-9), weighting="uniform")
     assert res.params["continuation"] == 4 and one.params["continuation"] == 1
     assert res.params["stage_ftol"] == 3e-4 and res.params["stage_window"] == 5
     assert res.status == "converged" and res.orthogonality <= 1e-10
@@ -209,13 +217,13 @@ def test_restricted_admm_matches_a_dense_reference(hand, hand_local):
 def test_fast_method_is_a_reasonable_approximation(hand, hand_local):
     _, lf = hand_local
     mu = 0.01 * hand.n
-    fast = compressed_modes(hand, 6, mu, method="fast", weighting="uniform", local_functions=lf.U,
-                            admm_options=ADMMOptions(rho=100.0, adapt_rho=False, max_iters=1500))
+    fast = compressed_modes(hand, 6, mu, solver=FastCMM(lf.U, rho=100.0, adapt_rho=False, max_iters=1500),
+                            weighting="uniform")
     assert fast.orthogonality <= 1e-10
-    full = compressed_modes(hand, 6, mu, method="block", weighting="uniform")
+    full = compressed_modes(hand, 6, mu, solver=BlockCMM(), weighting="uniform")
     assert full.objective <= fast.objective <= 1.25 * full.objective
-    with pytest.raises(ValueError, match="local_functions"):
-        compressed_modes(hand, 6, mu, method="fast")
+    with pytest.raises(TypeError, match="local_functions"):
+        FastCMM()
 
 
 def test_fast_method_default_rho_is_twice_the_kth_restricted_eigenvalue(hand, hand_local):
@@ -223,13 +231,11 @@ def test_fast_method_default_rho_is_twice_the_kth_restricted_eigenvalue(hand, ha
 
     _, lf = hand_local
     mu = 0.01 * hand.n
-    res = compressed_modes(hand, 6, mu, method="fast", weighting="uniform", local_functions=lf.U,
-                           admm_options=ADMMOptions(max_iters=50))
+    res = compressed_modes(hand, 6, mu, solver=FastCMM(lf.U, max_iters=50), weighting="uniform")
     lam = restricted_eigenbasis(hand.W, hand.A, lf.U, 6)[0]
     assert res.params["rho0"] == pytest.approx(2.0 * lam[-1], rel=1e-12)
     assert res.orthogonality <= 1e-10
-    given = compressed_modes(hand, 6, mu, method="fast", weighting="uniform", local_functions=lf.U,
-                             admm_options=ADMMOptions(rho=7.0, max_iters=5))
+    given = compressed_modes(hand, 6, mu, solver=FastCMM(lf.U, rho=7.0, max_iters=5), weighting="uniform")
     assert given.params["rho0"] == 7.0
 
 
@@ -237,8 +243,8 @@ def test_fast_method_default_rho_is_twice_the_kth_restricted_eigenvalue(hand, ha
 def test_select_mu_brackets_a_target_sparsity(knight):
     from objectives.cmm import select_mu
 
-    mu, res, trials = select_mu(knight, 3, 0.4, tol=0.08, max_evals=8, method="block", weighting="uniform",
-                                continuation=1, eps=1e-2, delta=1e-2, gtol=1e-5)
+    mu, res, trials = select_mu(knight, 3, 0.4, tol=0.08, max_evals=8, weighting="uniform",
+                                solver=BlockCMM(continuation=1, eps=1e-2, delta=1e-2, gtol=1e-5))
     assert abs(res.sparsity["1e-3"] - 0.4) <= 0.08 or len(trials) == 8
     sparsities = [s for _, s, _ in sorted(trials)]
     assert sparsities[0] <= sparsities[-1]  # sparser with larger μ
@@ -247,7 +253,7 @@ def test_select_mu_brackets_a_target_sparsity(knight):
 
 def test_sequential_callback_reports_each_column(knight):
     seen = []
-    res = compressed_modes(knight, 3, 0.01 * knight.n, method="sequential", max_iters=200,
+    res = compressed_modes(knight, 3, 0.01 * knight.n, solver=SequentialCMM(max_iters=200),
                            callback=lambda j, info: seen.append((j, np.asarray(info["x"]).copy())))
     assert [j for j, _ in seen] == [0, 1, 2]
     a = knight.A.diagonal()
@@ -294,7 +300,7 @@ def test_active_set_block_solver_agrees_with_shifted(hand):
     """Both preconditioners reach the same CMM objective (within 1e-3) on hand_868, k = 6, μ = 0.01n."""
     mu = 0.01 * hand.n
     ref = compressed_modes(hand, 6, mu, weighting="uniform")
-    res = compressed_modes(hand, 6, mu, weighting="uniform", preconditioner="active_set", refresh=25)
+    res = compressed_modes(hand, 6, mu, solver=BlockCMM(preconditioner="active_set", refresh=25), weighting="uniform")
     assert res.status == "converged"
     assert res.orthogonality <= 1e-10
     assert abs(res.objective - ref.objective) <= 1e-3 * ref.objective
@@ -308,8 +314,8 @@ def test_lbfgs_block_solver_agrees_with_cg(hand, preconditioner):
     """optimizer="lbfgs" reaches CG's CMM objective (within 1e-3) on hand_868, k = 6, μ = 0.01n."""
     mu = 0.01 * hand.n
     ref = compressed_modes(hand, 6, mu, weighting="uniform")
-    res = compressed_modes(hand, 6, mu, weighting="uniform", optimizer="lbfgs", preconditioner=preconditioner,
-                           refresh=25)
+    res = compressed_modes(hand, 6, mu, solver=BlockCMM(optimizer="lbfgs", preconditioner=preconditioner, refresh=25),
+                           weighting="uniform")
     assert res.status == "converged", res.status
     assert res.params["optimizer"] == "lbfgs"
     assert res.orthogonality <= 1e-10

@@ -1,0 +1,244 @@
+"""The manifold CMM solvers (thesis §6.5, Algorithm 6; MATH.md §4): ``BlockCMM`` and ``SequentialCMM``.
+
+Both minimise the smoothed energy ``tr(XᵀWX) + μ Σ_ij w_i s_{ε,δ}(X_ij)`` on ``XᵀAX = I``
+(``objectives.energies.cmm_energy``), with ε and δ driven to their targets in ``continuation``
+warm-started stages; the returned modes are re-orthonormalised exactly in A.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from typing import ClassVar
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import scipy.sparse as sp
+
+import stiefel
+from stiefel.operators import SparseOperator
+
+from . import smoothings
+from .active_set import ActiveSetPreconditioner
+from .admm import l1_weights_np, orthonormalize
+from .energies import cmm_energy
+from .cmm_base import (CMMSolver, SolverOptionError, SolverRun, Start, _check_int, _check_number, _is_number,
+                       _no_callback, _require)
+
+__all__ = ["BlockCMM", "SequentialCMM", "PRECONDITIONERS", "OPTIMIZERS"]
+
+PRECONDITIONERS = ("shifted", "active_set")
+OPTIMIZERS = ("cg", "lbfgs")
+
+
+def _continuation(eps: float, steps: int, start: float) -> list[float]:
+    """Smoothing widths of the stages: geometric from ``start`` to ``eps`` (just ``eps`` if ≤ 1 step)."""
+    if steps <= 1 or start <= eps:
+        return [eps]
+    return list(np.geomspace(start, eps, steps))
+
+
+def _block_rounds(F, manifold, X, P, *, gtol: float, ftol: float, max_iters: int, refresh: int | None = None,
+                  optimizer: str = "cg", ftol_window: int = 20):
+    """Riemannian CG/L-BFGS (``optimizer``) on the block, in one run (fixed ``P``) or in rounds of ``refresh``
+    iterations with an ``ActiveSetPreconditioner`` rebuilt before each round.
+
+    Returns ``(X, iterations, status, run seconds (incl. refreshes), compile seconds,
+    history {"time", "value", "monitor"})``; a round that ends converged ends the run.
+    """
+    if not isinstance(P, ActiveSetPreconditioner):
+        res = stiefel.minimize(F, manifold, X, method=optimizer, preconditioner=P, gtol=gtol, ftol=ftol,
+                               ftol_window=ftol_window, max_iters=max_iters, monitor=F.true_value)
+        h = res.trimmed_history()
+        h["time"] = np.linspace(0.0, res.wall_time, len(h["value"]))
+        return res.x, int(res.iterations), res.status_name, res.wall_time, res.compile_time, h
+    done, wall, compile_t, status = 0, 0.0, 0.0, "max_iters"
+    parts: dict = {"time": [], "value": [], "monitor": []}
+    while done < max_iters:
+        t0 = time.perf_counter()
+        P.refresh(X)
+        wall += time.perf_counter() - t0
+        res = stiefel.minimize(F, manifold, X, method=optimizer, preconditioner=P.apply, gtol=gtol, ftol=ftol,
+                               ftol_window=ftol_window, max_iters=min(refresh, max_iters - done), monitor=F.true_value,
+                               check=False)
+        h = res.trimmed_history()
+        first = 0 if done == 0 else 1  # a later round's entry 0 repeats the previous round's last
+        parts["time"].append(wall + np.linspace(0.0, res.wall_time, len(h["value"]))[first:])
+        parts["value"].append(h["value"][first:])
+        parts["monitor"].append(h["monitor"][first:])
+        wall += res.wall_time
+        compile_t += res.compile_time
+        done += int(res.iterations)
+        X = res.x
+        if res.status_name != "max_iters":
+            status = res.status_name
+            break
+    return X, done, status, wall, compile_t, {key: np.concatenate(v) for key, v in parts.items()}
+
+
+def _shifted_inverse(W, a, sigma: float, dtype):
+    """``(P, seconds)`` with ``P = (W + σA)⁻¹`` factored in ``dtype``; the seconds count as part of the run,
+    as ADMM's E-step factorisations do."""
+    t0 = time.perf_counter()
+    P = stiefel.as_operator(W + sp.diags_array(sigma * a), dtype=dtype)
+    return P, time.perf_counter() - t0
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class _SmoothedSolver(CMMSolver):
+    """Options shared by the manifold solvers: the ℓ1 smoothing (``objectives.smoothings``), whose ε and
+    δ both follow a geometric continuation of ``continuation`` stages from ``continuation_start``; the
+    per-stage ``gtol``/``max_iters``; σ of ``(W + σA)⁻¹`` (None: λ_{k−1}, the largest of the first k
+    eigenvalues, λ₁ for k ≤ 2 — the scale of the modes sought, ``bench/RESULTS.md``)."""
+
+    smoothing: str = "f6"
+    eps: float = 1e-3
+    delta: float = 1e-3
+    gtol: float = 1e-6
+    max_iters: int = 5000
+    continuation: int = 1
+    continuation_start: float = 1e-1
+    preconditioner_shift: float | None = None
+
+    def __post_init__(self) -> None:
+        _require(_is_number(self.eps) and _is_number(self.delta),
+                 f"eps and delta must be positive numbers, got {self.eps!r}, {self.delta!r}")
+        try:
+            smoothings.get(self.smoothing, self.eps, self.delta)  # the name, ε > 0 and δ > 0
+        except (ValueError, TypeError) as e:
+            raise SolverOptionError(f"{type(self).__name__}: {e}") from None
+        _check_number("gtol", self.gtol, 0)
+        _check_int("max_iters", self.max_iters, 1)
+        _check_int("continuation (the number of smoothing stages)", self.continuation, 1)
+        _check_number("continuation_start", self.continuation_start, 0, strict=True)
+        shift = self.preconditioner_shift
+        _require(shift is None or (_is_number(shift) and math.isfinite(shift) and shift > 0),
+                 f"preconditioner_shift must be None (λ_{{k−1}}) or a positive finite number, got {shift!r}")
+
+    def needs_eigenpairs(self, start: str) -> bool:
+        return start == "eigen" or self.preconditioner_shift is None
+
+    def _setup(self, W, a, mu: float, start: Start, weighting: str, dtype):
+        """``(σ, computation dtype, energy, stage widths, (ε/min, δ/min))``."""
+        sigma = self.preconditioner_shift
+        if sigma is None:
+            _require(start.evals is not None, f"{type(self).__name__} needs the first max(k, 2) eigenvalues in "
+                     "start.evals for its default shift, or preconditioner_shift=σ")
+            sigma = float(max(start.evals[-1], 1e-12))
+        # every array of the problem in the computation dtype (float32 runs stay float32)
+        dt = np.dtype(dtype or (jnp.float64 if jax.config.jax_enable_x64 else jnp.float32))
+        energy = cmm_energy(SparseOperator.from_scipy(W, dtype=dt), jnp.asarray(a, dtype=dt), mu,
+                            smoothing=self.smoothing, eps=self.eps, delta=self.delta, weighting=weighting)
+        low = min(self.eps, self.delta)
+        schedule = _continuation(low, self.continuation, self.continuation_start)
+        return sigma, dt, energy, schedule, (self.eps / low, self.delta / low)
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class BlockCMM(_SmoothedSolver):
+    """The block manifold solver (``stiefel.minimize`` on ``ΨᵀAΨ = I``, Cholesky retraction).
+
+    continuation: smoothing stages (default 4: δ = 0.1 → target); intermediate stages end once the
+      smoothed objective decreased by less than ``stage_ftol`` (relative) over ``stage_window``
+      iterations, so they only settle the modes' arrangement (``bench/RESULTS.md``: iterations to
+      ADMM's best 337 → 67 on camelhead, k = 10); the last runs to ``gtol`` or ``ftol`` (relative
+      decrease over 20 iterations — the gradient can stall above gtol in the rounding regime).
+    optimizer: ``"cg"`` (Riemannian CG) or ``"lbfgs"`` (each active-set round restarts its memory).
+    preconditioner: ``"shifted"`` (``(W + σA)⁻¹``, one factorisation) or ``"active_set"``
+      (``W + σA`` plus the ℓ1 curvature of the entries pinned at zero, rebuilt every ``refresh`` iterations).
+    """
+
+    name: ClassVar[str] = "block"
+    continuation: int = 4
+    ftol: float = 1e-7
+    stage_ftol: float = 3e-4
+    stage_window: int = 5
+    optimizer: str = "cg"
+    preconditioner: str = "shifted"
+    refresh: int = 50
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        _check_number("ftol", self.ftol, 0)
+        # the early stop of the intermediate continuation stages
+        _check_int("stage_window", self.stage_window, 1)
+        _check_number("stage_ftol", self.stage_ftol, 0)
+        _require(self.optimizer in OPTIMIZERS, f"unknown optimizer {self.optimizer!r}; choose one of {OPTIMIZERS}")
+        _require(self.preconditioner in PRECONDITIONERS,
+                 f"unknown preconditioner {self.preconditioner!r}; choose one of {PRECONDITIONERS}")
+        _check_int("refresh", self.refresh, 1)
+
+    def solve(self, W, a, k, mu, start, *, weighting="area", seed=0, dtype=None, callback=None) -> SolverRun:
+        """Continuation over the smoothing stages, warm-started; history ``time``, ``smoothed_objective``
+        and ``objective`` (true), one entry per iterate."""
+        _no_callback(self, callback)
+        sigma, dt, energy, schedule, (ratio_e, ratio_d) = self._setup(W, a, mu, start, weighting, dtype)
+        P, t_factor = _shifted_inverse(W, a, sigma, dt) if self.preconditioner == "shifted" else (None, 0.0)
+        manifold = stiefel.GeneralizedStiefel(a, k, retraction="cholesky", dtype=dtype)
+        X = manifold.project_to_manifold(jnp.asarray(start.X0, dtype=dt))
+        iters, wall, compile_t, status = 0, t_factor, 0.0, "converged"
+        times, values, true_values = [], [], []
+        active = None
+        for stage, s in enumerate(schedule):
+            F = energy.with_params(eps=s * ratio_e, delta=s * ratio_d)
+            # intermediate stages only need the arrangement of the modes: stop once they stall
+            last = stage == len(schedule) - 1
+            stop = dict(ftol=self.ftol) if last else dict(ftol=max(self.ftol, self.stage_ftol),
+                                                          ftol_window=self.stage_window)
+            if P is None:
+                if active is None:
+                    active = ActiveSetPreconditioner(W, a, sigma, mu, l1_weights_np(a, weighting), s)
+                active.set_width(s)
+            X, it_stage, st, t_run, t_compile, h = _block_rounds(
+                F, manifold, X, P if P is not None else active, gtol=self.gtol, max_iters=self.max_iters,
+                refresh=self.refresh, optimizer=self.optimizer, **stop)
+            iters += it_stage
+            first = 0 if stage == 0 else 1  # a later stage's entry 0 is the previous stage's last iterate
+            true_values.extend(list(h["monitor"][first:]))
+            times.extend(list(wall + h["time"][first:]))
+            values.extend(list(h["value"][first:]))
+            wall += t_run
+            compile_t += t_compile
+            if st != "converged":
+                status = st
+        history = {"time": np.asarray(times), "smoothed_objective": np.asarray(values),
+                   "objective": np.asarray(true_values)}
+        Psi = orthonormalize(np.asarray(X, dtype=np.float64), a)  # exact A-orthonormality of the returned modes
+        return SolverRun(Psi, iters, status, wall, compile_t, history, {})
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class SequentialCMM(_SmoothedSolver):
+    """Thesis Algorithm 6 (``stiefel.minimize_sequential``): CG column by column, preconditioned by
+    ``(W + σA)⁻¹``; ``continuation`` stages (default 1: none) each restart at column 0."""
+
+    name: ClassVar[str] = "sequential"
+    supports_callback: ClassVar[bool] = True
+
+    def solve(self, W, a, k, mu, start, *, weighting="area", seed=0, dtype=None, callback=None) -> SolverRun:
+        """``callback(j, info)`` after each finished column (``stiefel.minimize_sequential``'s), so a long run
+        can save its columns; history ``time`` and ``smoothed_objective``, one entry per stage."""
+        sigma, dt, energy, schedule, (ratio_e, ratio_d) = self._setup(W, a, mu, start, weighting, dtype)
+        P, t_factor = _shifted_inverse(W, a, sigma, dt)
+        X = jnp.asarray(start.X0, dtype=dt)
+        iters, wall, compile_t, status = 0, t_factor, 0.0, "converged"
+        times, values = [], []
+        for s in schedule:
+            F = energy.with_params(eps=s * ratio_e, delta=s * ratio_d)
+            res = stiefel.minimize_sequential(F, a, k, X0=np.asarray(X), preconditioner=P, gtol=self.gtol,
+                                              max_iters=self.max_iters, dtype=dtype, callback=callback)
+            X = res.x
+            iters += int(np.sum(np.asarray(res.iterations)))
+            names = set(res.status_names)
+            st = "converged" if names == {"converged"} else sorted(names - {"converged"})[0]
+            times.append(wall + res.wall_time)
+            values.append(float(res.value))
+            wall += res.wall_time
+            compile_t += res.compile_time
+            if st != "converged":
+                status = st
+        history = {"time": np.asarray(times), "smoothed_objective": np.asarray(values)}
+        Psi = orthonormalize(np.asarray(X, dtype=np.float64), a)
+        return SolverRun(Psi, iters, status, wall, compile_t, history, {})

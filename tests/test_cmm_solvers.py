@@ -1,0 +1,209 @@
+"""The CMM solver objects (``objectives.cmm_solvers``) and the thin ``compressed_modes(solver=...)``.
+
+Reference values: objectives measured with the keyword API this replaced
+(``compressed_modes(lap, k, mu, method=..., <options>)``, commit 912ba04) on the built-in demo
+mesh at 3 subdivisions (n = 642), k = 4, μ = 0.01n, uniform weighting, eigenbasis start.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+import mesh
+import objectives
+from cli.demo_mesh import demo_mesh
+from objectives import cmm
+from objectives.cmm import METHODS, compressed_modes, select_mu
+from objectives.cmm_solvers import (SOLVERS, ADMMCMM, BlockCMM, CMMSolver, FastCMM, SequentialADMMCMM, SequentialCMM,
+                                    SolverOptionError)
+
+K = 4
+
+
+@pytest.fixture(scope="module")
+def demo():
+    m = mesh.load(demo_mesh(subdivisions=3))
+    lap = mesh.laplacian(m)
+    U = mesh.local_functions(m, n_samples=max(10 * K, lap.n // 10)).U
+    return lap, U
+
+
+# ---------------------------------------------------------------------------- options
+
+
+BAD_OPTIONS = [
+    (lambda U: BlockCMM(smoothing="f11"), "unknown smoothing"),
+    (lambda U: BlockCMM(eps=0.0), "eps must be a positive"),
+    (lambda U: SequentialCMM(delta=-1e-3), "delta must be a positive"),
+    (lambda U: BlockCMM(eps=None), "eps and delta must be positive numbers"),
+    (lambda U: BlockCMM(gtol=-1.0), "gtol must be a number ≥ 0"),
+    (lambda U: BlockCMM(ftol=float("nan")), "ftol must be a number ≥ 0"),
+    (lambda U: SequentialCMM(max_iters=0), "max_iters must be an integer ≥ 1"),
+    (lambda U: BlockCMM(max_iters=10.5), "max_iters must be an integer ≥ 1"),
+    (lambda U: BlockCMM(continuation=0), "continuation"),
+    (lambda U: SequentialCMM(continuation_start=0.0), "continuation_start must be a number > 0"),
+    (lambda U: BlockCMM(stage_window=0), "stage_window must be an integer ≥ 1"),
+    (lambda U: BlockCMM(stage_ftol=-1.0), "stage_ftol must be a number ≥ 0"),
+    (lambda U: BlockCMM(optimizer="newton"), "unknown optimizer 'newton'"),
+    (lambda U: BlockCMM(preconditioner="ilu"), "unknown preconditioner 'ilu'"),
+    (lambda U: BlockCMM(refresh=0), "refresh must be an integer ≥ 1"),
+    (lambda U: SequentialCMM(preconditioner_shift=0.0), "preconditioner_shift must be None"),
+    (lambda U: ADMMCMM(variant="frobenius"), "unknown ADMM variant 'frobenius'"),
+    (lambda U: ADMMCMM(rho=-1.0), "rho must be None"),
+    (lambda U: SequentialADMMCMM(adapt_rho="sometimes"), "adapt_rho must be"),
+    (lambda U: ADMMCMM(rho_tau=1.0), "rho_tau must be a number > 1"),
+    (lambda U: ADMMCMM(rho_ratio=0.5), "rho_ratio must be a number ≥ 1"),
+    (lambda U: ADMMCMM(adapt_every=0), "adapt_every must be an integer ≥ 1"),
+    (lambda U: SequentialADMMCMM(eps_abs=-1e-7), "eps_abs must be a number ≥ 0"),
+    (lambda U: FastCMM(U, max_iters=0), "max_iters must be an integer ≥ 1"),
+    (lambda U: FastCMM(U, time_limit=0.0), "time_limit"),
+    (lambda U: FastCMM(np.ones(5)), r"local_functions must be an \(n, d\) matrix"),
+    (lambda U: FastCMM(None), r"local_functions must be an \(n, d\) matrix"),
+]
+
+
+@pytest.mark.parametrize("make, match", BAD_OPTIONS, ids=[m for _, m in BAD_OPTIONS])
+def test_each_solver_rejects_bad_options_on_construction(demo, make, match):
+    with pytest.raises(SolverOptionError, match=match) as info:
+        make(demo[1])
+    assert isinstance(info.value, ValueError)  # a named ValueError: existing `except ValueError` still catches it
+
+
+FIELDS = {
+    BlockCMM: {"smoothing", "eps", "delta", "gtol", "ftol", "max_iters", "continuation", "continuation_start",
+               "stage_ftol", "stage_window", "optimizer", "preconditioner", "preconditioner_shift", "refresh"},
+    SequentialCMM: {"smoothing", "eps", "delta", "gtol", "max_iters", "continuation", "continuation_start",
+                    "preconditioner_shift"},
+    ADMMCMM: {"rho", "adapt_rho", "rho_ratio", "rho_tau", "adapt_every", "eps_abs", "eps_rel", "max_iters",
+              "time_limit", "variant"},
+    SequentialADMMCMM: {"rho", "adapt_rho", "rho_ratio", "rho_tau", "adapt_every", "eps_abs", "eps_rel",
+                        "max_iters", "time_limit"},
+    FastCMM: {"local_functions", "rho", "adapt_rho", "rho_ratio", "rho_tau", "adapt_every", "eps_abs", "eps_rel",
+              "max_iters", "time_limit"},
+}
+
+
+def test_each_solver_holds_only_its_own_options(demo):
+    U = demo[1]
+    for cls, names in FIELDS.items():
+        assert {f.name for f in dataclasses.fields(cls)} == names, cls.__name__
+    # an option of another method is not there at all: no keyword soup
+    for make in (lambda: SequentialCMM(optimizer="lbfgs"), lambda: SequentialCMM(preconditioner="active_set"),
+                 lambda: SequentialCMM(stage_ftol=1e-3), lambda: BlockCMM(variant="thesis"),
+                 lambda: ADMMCMM(smoothing="f6"), lambda: ADMMCMM(gtol=1e-6), lambda: ADMMCMM(local_functions=U),
+                 lambda: SequentialADMMCMM(variant="thesis"), lambda: FastCMM(U, variant="exact"),
+                 lambda: FastCMM(U, eps=1e-3)):
+        with pytest.raises(TypeError, match="unexpected keyword argument"):
+            make()
+    with pytest.raises(TypeError):  # the options are keywords: no positional soup either
+        BlockCMM("f6")
+    assert SOLVERS == {"block": BlockCMM, "sequential": SequentialCMM, "admm": ADMMCMM,
+                       "admm_sequential": SequentialADMMCMM, "fast": FastCMM}
+    assert METHODS == tuple(SOLVERS)
+    for name in ("BlockCMM", "SequentialCMM", "ADMMCMM", "SequentialADMMCMM", "FastCMM", "CMMSolver"):
+        assert getattr(objectives, name) is getattr(objectives.cmm_solvers, name)
+
+
+def test_solvers_are_immutable_values(demo):
+    U = demo[1]
+    b = BlockCMM(optimizer="lbfgs")
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        b.optimizer = "cg"
+    assert b == BlockCMM(optimizer="lbfgs") and hash(b) == hash(BlockCMM(optimizer="lbfgs"))
+    assert b != BlockCMM() and BlockCMM() != SequentialCMM()
+    assert ADMMCMM() != SequentialADMMCMM()  # same fields' values, different method
+    assert len({BlockCMM(), BlockCMM(), SequentialCMM(), ADMMCMM(), ADMMCMM(variant="thesis")}) == 4
+    # a changed copy is validated like a new object
+    assert dataclasses.replace(b, refresh=10).refresh == 10 and b.refresh == 50
+    with pytest.raises(SolverOptionError, match="refresh"):
+        dataclasses.replace(b, refresh=0)
+    # FastCMM holds a matrix: equal (and hashed alike) when it is the same U with equal options
+    f = FastCMM(U, rho=3.0)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        f.rho = 4.0
+    assert f == FastCMM(U, rho=3.0) and hash(f) == hash(FastCMM(U, rho=3.0))
+    assert f != FastCMM(U, rho=4.0) and f != FastCMM(U.copy(), rho=3.0)
+    assert f.as_dict()["local_functions"] == U.shape and "local_functions=<" in repr(f)
+    assert ADMMCMM(variant="thesis", rho=5.0).admm_options() == objectives.admm.ADMMOptions(variant="thesis", rho=5.0)
+
+
+# ---------------------------------------------------------------------------- the thin entry point
+
+
+def test_compressed_modes_checks_what_the_solver_takes(demo):
+    lap, U = demo
+    with pytest.raises(SolverOptionError, match=r"use BlockCMM\(...\)"):
+        compressed_modes(lap, K, 1.0, solver="block")
+    with pytest.raises(SolverOptionError, match="takes no callback"):
+        compressed_modes(lap, K, 1.0, solver=BlockCMM(), callback=print)
+    with pytest.raises(SolverOptionError, match="start='eigen' or 'random'"):
+        compressed_modes(lap, K, 1.0, solver=FastCMM(U), start=np.zeros((lap.n, K)))
+    with pytest.raises(SolverOptionError, match="local_functions has 10 rows"):
+        compressed_modes(lap, K, 1.0, solver=FastCMM(U[:10]))
+
+
+def test_eigenpairs_are_computed_once_and_only_when_used(demo, monkeypatch):
+    """The eigenbasis start and the default shift σ = λ_{k−1} share one eigensolve; ADMM with a random
+    start, the fast method and a block solver with a given shift and a random start need none."""
+    lap, U = demo
+    calls = []
+    real = cmm.first_eigenpairs
+
+    def spy(W, a, k):
+        calls.append(k)
+        return real(W, a, k)
+
+    monkeypatch.setattr(cmm, "first_eigenpairs", spy)
+    expected = [(BlockCMM(max_iters=2), "eigen", 1), (BlockCMM(max_iters=2, preconditioner_shift=1.0), "random", 0),
+                (SequentialCMM(max_iters=2), "random", 1), (ADMMCMM(max_iters=2), "eigen", 1),
+                (ADMMCMM(max_iters=2), "random", 0), (FastCMM(U, max_iters=2), "eigen", 0)]
+    for solver, start, n_calls in expected:
+        calls.clear()
+        res = compressed_modes(lap, K, 0.01 * lap.n, solver=solver, start=start, weighting="uniform")
+        assert len(calls) == n_calls, (solver, start)
+        assert res.orthogonality <= 1e-10
+
+
+REFERENCE = [  # solver, expected objective and iterations under the keyword API (module docstring)
+    (lambda U: BlockCMM(max_iters=600), 99.44147293739373, 115),
+    (lambda U: BlockCMM(optimizer="lbfgs", preconditioner="active_set", refresh=25, max_iters=600),
+     99.440746282728, 103),
+    (lambda U: SequentialCMM(max_iters=150), 101.36805585742691, 90),
+    (lambda U: ADMMCMM(max_iters=1500), 99.44072038357753, 980),
+    (lambda U: ADMMCMM(variant="thesis", rho=100.0, adapt_rho=False, max_iters=400), 101.64362320413419, 400),
+    (lambda U: SequentialADMMCMM(max_iters=300), 101.36805268621117, 430),
+    (lambda U: FastCMM(U, max_iters=800), 101.19061925266543, 800),
+]
+
+
+@pytest.mark.parametrize("make, objective, iterations", REFERENCE,
+                         ids=["block", "block-lbfgs-active-set", "sequential", "admm", "admm-thesis",
+                              "admm-sequential", "fast"])
+def test_each_solver_reproduces_the_keyword_api(demo, make, objective, iterations):
+    lap, U = demo
+    solver = make(U)
+    res = compressed_modes(lap, K, 0.01 * lap.n, solver=solver, weighting="uniform")
+    assert abs(res.objective - objective) <= 1e-10 * objective, (res.objective, objective)
+    assert res.iterations == iterations
+    assert res.method == solver.name and res.params["method"] == solver.name
+    assert res.orthogonality <= 1e-10 and np.all(np.diff(res.compressed_eigenvalues) >= 0)
+    # params: the problem's settings and this solver's options, nobody else's
+    assert {k: res.params[k] for k in ("k", "mu", "weighting", "seed", "start")} == dict(
+        k=K, mu=0.01 * lap.n, weighting="uniform", seed=0, start="eigen")
+    own = solver.as_dict()
+    assert {k: res.params[k] for k in own} == own
+    others = set().union(*FIELDS.values()) - set(own)
+    assert not others & set(res.params)
+    assert ("rho0" in res.params) == isinstance(solver, (ADMMCMM, SequentialADMMCMM, FastCMM))
+
+
+def test_select_mu_passes_the_solver_through(demo):
+    lap, _ = demo
+    solver = ADMMCMM(max_iters=60)
+    mu, res, trials = select_mu(lap, K, 0.3, max_evals=2, solver=solver, weighting="uniform")
+    assert len(trials) == 2 and res.method == "admm" and res.params["max_iters"] == 60
+    assert res.iterations <= 60 and mu in [t[0] for t in trials]
+    assert isinstance(solver, CMMSolver)
