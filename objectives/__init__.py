@@ -20,9 +20,10 @@ This package joins ``stiefel`` (operators) and the mesh quantities (W, A), but
 imports nothing from ``mesh``: callers pass the matrices.
 """
 
-from . import admm, bases, batch, cmm, cmm_solvers, evaluation, fast, fmaps, smoothings
+from . import admm, bases, batch, cmm, cmm_solvers, differentiable, evaluation, fast, fmaps, smoothings
 from .batch import BatchResult, cmm_batch
 from .cmm import CMMResult, compressed_modes, select_mu
+from .differentiable import cmm_solve
 from .cmm_solvers import ADMMCMM, BlockCMM, CMMSolver, FastCMM, SequentialADMMCMM, SequentialCMM, SolverOptionError
 from .energies import (
     CMMEnergy,
@@ -38,6 +39,8 @@ from .smoothings import NAMES as SMOOTHING_NAMES
 from .smoothings import Smoothing
 
 __all__ = [
+    "cmm_solve",
+    "differentiable",
     "admm",
     "bases",
     "batch",
