@@ -28,6 +28,7 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
     "batch": ("bench.bench_batch", "batched solves (issue 7, batching)"),
     "precision": ("bench.bench_precision", "float32 vs float64 (issue 7, precision)"),
     "autodiff": ("bench.bench_autodiff", "implicit derivatives through CMM solves: backward vs forward (issue 16)"),
+    "penalty": ("bench.bench_penalty", "penalty baseline (jaxopt L-BFGS + projection) vs the manifold solvers"),
 }
 
 

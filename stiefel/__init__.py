@@ -37,6 +37,7 @@ from .errors import NotSPDError, OffManifoldError, ShapeError, SolverError, Stie
 from .linesearch import LineSearchResult, LineSearchStatus, along_curve, strong_wolfe
 from .manifold import GeneralizedStiefel, skew, sym
 from .operators import DenseOperator, DiagonalOperator, LinearOperator, SparseOperator, as_operator
+from .penalty import PenaltyResult, penalty_minimize
 from .preconditioning import (
     PRECONDITIONING_MODES,
     as_preconditioner,

@@ -38,7 +38,7 @@ from .block_steps import State
 from .errors import StiefelError
 from .manifold import GeneralizedStiefel
 from .preconditioning import PRECONDITIONING_MODES
-from .result import History, Status
+from .result import Status
 
 __all__ = ["RiemannianCG", "RiemannianLBFGS", "RiemannianBB", "STALL_WINDOW_MAX", "to_optx_result"]
 

@@ -27,7 +27,6 @@ def test_hessian_matches_fd_of_gradient_along_retraction(kind, metric):
     """Hess F(X)[ξ] = P_X(d/dt grad F(R_X(tξ)))|₀ (central FD), and Hess is ⟨·,·⟩_M-self-adjoint."""
     M = metric_matrix(kind, N, seed=4)
     S = GeneralizedStiefel(M, K, metric=metric, retraction="cholesky")
-    E = S.euclidean_to_riemannian_gradient  # noqa: F841  (pymanopt alias exists)
     W = jnp.asarray(_random_sym(N, 1))
     F = lambda X: jnp.trace(X.T @ W @ X @ jnp.diag(jnp.arange(1.0, K + 1))) + jnp.sum(jnp.cos(X))  # noqa: E731
     X = S.random_point(jax.random.PRNGKey(0))
