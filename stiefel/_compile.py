@@ -9,6 +9,39 @@ import equinox as eqx
 import jax
 
 
+def _captured(obj, depth: int = 3) -> list:
+    """Values a callable closes over (closure cells, ``functools.partial`` arguments, ``__self__``)."""
+    if depth == 0 or not callable(obj):
+        return []
+    out = list(getattr(obj, "args", ()) or ()) + list((getattr(obj, "keywords", None) or {}).values())
+    for cell in getattr(obj, "__closure__", None) or ():
+        try:
+            out.append(cell.cell_contents)
+        except ValueError:  # an empty cell
+            continue
+    if getattr(obj, "__self__", None) is not None:
+        out.append(obj.__self__)
+    for value in list(out):
+        out.extend(_captured(value, depth - 1))
+    return out
+
+
+def is_traced(*trees) -> bool:
+    """Whether a JAX transformation is tracing this call: a tracer among the leaves of ``trees`` or
+    among the values their callables close over, or (where JAX exposes it) an active trace."""
+    try:
+        from jax._src.core import trace_state_clean  # noqa: PLC0415
+
+        if not trace_state_clean():
+            return True
+    except ImportError:  # not in every JAX version: the leaves below still catch the usual cases
+        pass
+    leaves = jax.tree_util.tree_leaves(trees)
+    for leaf in list(leaves):
+        leaves.extend(jax.tree_util.tree_leaves(_captured(leaf)))
+    return any(isinstance(leaf, jax.core.Tracer) for leaf in leaves)
+
+
 @partial(jax.jit, static_argnums=(1,))
 def _call(dynamic, static):
     fn, static_args = static

@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from ._compile import run_compiled
+from ._compile import is_traced, run_compiled
 from .errors import StiefelError
 from .implicit import RiemannianImplicitAdjoint
 from .manifold import GeneralizedStiefel
@@ -110,10 +110,6 @@ def _run(fn, solver, X0, args, max_steps: int, adjoint):
     status = jnp.where(st["status"] >= 0, st["status"], Status.MAX_ITERS).astype(jnp.int32)
     stats = {key: st[key] for key in ("n_fevals", "n_grads", "n_restarts", "dist_to_manifold")}
     return sol.value, st["value"], st["grad_norm"], st["num_steps"], status, st["history"], stats
-
-
-def _is_traced(tree) -> bool:
-    return any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(tree))
 
 
 def solve(F: Callable, manifold: GeneralizedStiefel, X0, options: BlockOptions = BlockOptions(), *,
@@ -222,8 +218,8 @@ def minimize(
     if precondition not in PRECONDITIONING_MODES:
         raise StiefelError(f"unknown precondition mode {precondition!r}; choose one of {PRECONDITIONING_MODES}")
     X0 = jnp.asarray(X0, dtype=manifold.dtype)
-    traced = _is_traced((F, manifold, X0, args, preconditioner))
-    if check and not _is_traced(X0):
+    traced = is_traced(F, manifold, X0, args, preconditioner, monitor)
+    if check and not is_traced(X0):
         manifold.check_point(X0, atol=max(1e-8, 1e3 * float(jnp.finfo(manifold.dtype).eps)))
     P = as_preconditioner(preconditioner)
     c2 = (0.9 if method == "lbfgs" else 0.1) if c2 is None else c2

@@ -33,7 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._compile import run_compiled
+from ._compile import is_traced, run_compiled
 from .errors import ShapeError, StiefelError
 from .linesearch import along_curve, strong_wolfe
 from .operators import LinearOperator, as_operator
@@ -278,9 +278,17 @@ def minimize_sequential(
 
     Returns:
       ``SequentialResult`` (per-column status, iterations, history and timings).
+
+    Not differentiable: called under ``jax.grad``/``jax.jvp``/``jit`` it raises ``StiefelError``
+    (use ``stiefel.minimize``, whose solutions have implicit derivatives).
     """
     if direction not in DIRECTIONS:
         raise StiefelError(f"unknown direction {direction!r}; choose one of {DIRECTIONS}")
+    if is_traced(f, M, X0, preconditioner):
+        raise StiefelError(
+            "minimize_sequential cannot run inside jax.grad/jax.jvp/jit (it is a host loop over columns and "
+            "has no implicit derivative); differentiate a block solve instead: stiefel.minimize(F, S, X0, args=θ)"
+        )
     if precondition not in PRECONDITIONING_MODES:
         raise StiefelError(f"unknown precondition mode {precondition!r}; choose one of {PRECONDITIONING_MODES}")
     if retraction != "periodic":
