@@ -19,7 +19,7 @@ from typing import Any, Callable
 import jax
 from jaxtyping import Array, Float
 
-from .manifold import GeneralizedStiefel, sym
+from .manifold import GeneralizedStiefel
 
 __all__ = ["riemannian_hessian", "hessian_operator"]
 
@@ -44,5 +44,4 @@ def hessian_operator(fn: Callable, manifold: GeneralizedStiefel, X: Float[Array,
     """``ξ ↦ Hess F(X)[ξ]`` with the gradient linearised once (``jax.linearize``): repeated
     products (e.g. inside CG) cost one linearised Hessian action each."""
     G, hvp = jax.linearize(jax.grad(_euclidean(fn, args)), X)
-    S = sym(X.T @ G)
-    return lambda xi: manifold.proj(X, manifold.op.solve(hvp(xi)) - xi @ S)
+    return lambda xi: manifold.ehess_to_rhess(X, G, hvp(xi), xi)

@@ -128,7 +128,9 @@ def _implicit_jvp(primals, tangents):
         return riemannian_residual(_fn, _solver.manifold, root, _args)
 
     _, r_dot = jax.jvp(r_of, (diff,), (t_inputs,))
-    jac = lambda Z: jax.jvp(lambda Y: riemannian_residual(fn, S, Y, args), (root,), (Z,))[1]  # noqa: E731
+    # linearised once: each adjoint CG step is then one Hessian action, not a re-evaluation of the
+    # residual at the root (its gradient and, for sparse M, a host solve) followed by its derivative
+    _, jac = jax.linearize(lambda Y: riemannian_residual(fn, S, Y, args), root)
     P = solver.preconditioner if adjoint.precondition else None
     t_root = tangent_solve(jac, S, root, -r_dot, invariant=adjoint.invariant, preconditioner=P,
                                 tol=adjoint.tol, max_steps=adjoint.max_steps)
