@@ -2,12 +2,15 @@
 
 The mesh layer knows nothing of optimisation. Public API:
 
-* ``load(source) -> Mesh`` — path (OBJ/OFF/PLY/STL), ``trimesh.Trimesh`` or
-  ``(vertices, faces)``; validates, cleans and reports (``Mesh.report``),
-  records topology (components, boundary loops, Euler characteristic). Bad input
-  raises a ``MeshError`` subclass (``EmptyMeshError``, ``NonFiniteVerticesError``,
-  ``NonTriangleFacesError``, ``NonManifoldError``, ``IndexOutOfRangeError``,
-  ``DegenerateMeshError``); several components warn (``MultipleComponentsWarning``).
+* ``load(source, *, allow_nonmanifold=False, ...) -> Mesh`` — path (OBJ/OFF/PLY/STL,
+  optionally ``.gz``; read strictly), ``trimesh.Trimesh`` or ``(vertices, faces)``;
+  validates, cleans and reports (``Mesh.report``: ``CleaningReport`` with
+  ``lines()`` and ``as_dict()``), records topology (components, boundary loops,
+  Euler characteristic, non-manifold edges/vertices). Bad input raises a
+  ``MeshError`` subclass (``MeshFormatError`` with ``path:line:``, ``EmptyMeshError``,
+  ``NonFiniteVerticesError``, ``MeshScaleError``, ``NonTriangleFacesError``,
+  ``NonManifoldError``, ``IndexOutOfRangeError``, ``DegenerateMeshError``); changes
+  warn once (``MeshCleaningWarning``), several components too (``MultipleComponentsWarning``).
 * ``laplacian(m, weights=, area=, normalize_area=True) -> Laplacian`` — ``W``, ``A`` as
   scipy CSR and as JAX operators (``lap.W_op``, ``lap.A_op``); ``robust_laplacian(m)``.
 * ``laplacian_jax(V, F, area=, normalize_area=True) -> (W, A)`` — the cotangent pair as BCOO,
@@ -48,7 +51,10 @@ from .errors import (
     DegenerateMeshError,
     EmptyMeshError,
     IndexOutOfRangeError,
+    MeshCleaningWarning,
     MeshError,
+    MeshFormatError,
+    MeshScaleError,
     MultipleComponentsWarning,
     NonFiniteVerticesError,
     NonManifoldError,
@@ -72,7 +78,10 @@ __all__ = [
     "Laplacian",
     "LocalFunctions",
     "Mesh",
+    "MeshCleaningWarning",
     "MeshError",
+    "MeshFormatError",
+    "MeshScaleError",
     "MultipleComponentsWarning",
     "NonFiniteVerticesError",
     "NonManifoldError",

@@ -23,6 +23,7 @@ import numpy as np
 import scipy.sparse as sp
 from jaxtyping import Float
 
+from .errors import NonManifoldError
 from .io import Mesh, edges_of, face_areas
 
 __all__ = [
@@ -278,12 +279,22 @@ def laplacian(
 
     Returns:
       a ``Laplacian``.
+
+    Raises:
+      NonManifoldError: cotangent weights on a mesh with edges shared by more
+        than two faces (``load(..., allow_nonmanifold=True)``); use ``"robust"``.
     """
     if weights not in WEIGHTS:
         raise ValueError(f"unknown weights {weights!r}; choose one of {WEIGHTS}")
     if area not in AREAS:
         raise ValueError(f"unknown area {area!r}; choose one of {AREAS}")
     extra: dict = {}
+    if weights == "cotangent" and not m.is_edge_manifold:
+        raise NonManifoldError(
+            f"the mesh has {m.n_nonmanifold_edges} non-manifold edge(s) (loaded with allow_nonmanifold=True): "
+            "cotangent weights assume at most two faces per edge; use weights='robust' (mesh.robust_laplacian; "
+            "--laplacian robust on the command line) or weights='graph'"
+        )
     if weights == "robust":
         W, A_robust = _robust(m, mollify_factor)
         A = A_robust if area == "lumped" else area_matrix(m, area)

@@ -11,6 +11,9 @@ import trimesh
 import mesh
 from mesh_fixtures import grid, quiet_load, shared_mesh, shared_path, sphere, two_spheres
 
+# every cleaning step warns once (MeshCleaningWarning); tests/test_mesh_loading_faults.py checks that
+pytestmark = pytest.mark.filterwarnings("ignore::mesh.MeshCleaningWarning")
+
 
 @pytest.mark.parametrize(
     "name, chi, loops",
@@ -27,13 +30,14 @@ def test_shared_small_meshes_topology(name, chi, loops):
     assert not m.report.changed
 
 
-def test_horse_unreferenced_listed_vertices_are_cleaned_and_reported():
+def test_horse_normals_do_not_split_vertices():
+    # 976 positions, 5844 normals, faces "f v//vn": the strict OBJ reader indexes positions, so
+    # nothing needs cleaning (trimesh split every position per normal: 5844 vertices, merged back)
     m = mesh.load(shared_path("horse_976.obj"))
     r = m.report
-    assert r.input_vertices == 5844 and r.input_faces == 1948
+    assert r.input_vertices == 976 and r.input_faces == 1948
     assert m.n_vertices == 976 and m.n_faces == 1948
-    assert r.changed
-    assert r.merged_duplicate_vertices + r.dropped_unreferenced_vertices == 5844 - 976
+    assert not r.changed and r.lines() == []
     assert m.n_components == 1 and m.is_closed and m.euler_characteristic == 2
 
 
@@ -43,6 +47,12 @@ def test_cube_40k_volume_faces_raise_non_manifold():
     msg = str(info.value)
     assert "non-manifold edge" in msg and "e.g. edge (" in msg and "repair" in msg
     assert isinstance(info.value, ValueError) and isinstance(info.value, mesh.MeshError)
+    assert "allow_nonmanifold=True" in msg
+    # its 4-corner "faces" are tetrahedra: on request it loads, every count reported
+    m = mesh.load(shared_path("cube_40k.obj"), allow_nonmanifold=True)
+    r = m.report
+    assert (r.triangulated_quads, r.nonplanar_polygons, r.dropped_duplicate_faces) == (48000, 48000, 8000)
+    assert m.n_nonmanifold_edges == r.n_nonmanifold_edges == 55580 and not m.is_edge_manifold
 
 
 def test_nan_coordinate_of_a_used_vertex_raises():
