@@ -25,9 +25,15 @@ from jaxtyping import Float
 
 from stiefel.sparse_factor import SymmetricFactor
 
+from .errors import MeshError
 from .laplacian import Laplacian
 
-__all__ = ["Eigenbasis", "eigenbasis"]
+__all__ = ["Eigenbasis", "eigenbasis", "EigenInputError"]
+
+
+class EigenInputError(MeshError):
+    """The eigenproblem cannot be posed: ``k`` is not an integer in ``[1, n − 1]``, an option is out of
+    range, or ``W``/``A`` has NaN or infinite entries."""
 
 
 class Eigenbasis(NamedTuple):
@@ -50,6 +56,37 @@ def _spectral_scale(lap: Laplacian) -> float:
     return float(np.max(np.abs(w) / np.maximum(np.abs(a), np.finfo(float).tiny)))
 
 
+def _is_int(v) -> bool:
+    return isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_))
+
+
+def _check_finite(name: str, M) -> None:
+    data = M.data if sp.issparse(M) else np.asarray(M)
+    bad = int(np.sum(~np.isfinite(data)))
+    if bad:
+        raise EigenInputError(f"{name} has {bad} non-finite entries (NaN or inf): the eigenproblem is undefined; "
+                              "rebuild the Laplacian from a clean mesh (mesh.load repairs or refuses bad vertices)")
+
+
+def _check_inputs(lap: Laplacian, k, sigma, tol, seed) -> None:
+    """Everything ``eigenbasis`` needs, before any factorisation (``EigenInputError`` naming the cause)."""
+    n = lap.n
+    if not _is_int(k) or not 1 <= int(k) < n:
+        raise EigenInputError(
+            f"k must be an integer with 1 ≤ k < n = {n} (ARPACK's shift-invert Lanczos needs k < n; there is "
+            f"no dense fallback: for all n eigenpairs of a small mesh use scipy.linalg.eigh(W.toarray(), "
+            f"A.toarray())), got k = {k!r}")
+    if sigma is not None and not (isinstance(sigma, (int, float, np.integer, np.floating))
+                                  and not isinstance(sigma, bool) and np.isfinite(sigma)):
+        raise EigenInputError(f"sigma must be a finite number (or None: −1e-8·s), got {sigma!r}")
+    if not (isinstance(tol, (int, float, np.integer, np.floating)) and not isinstance(tol, bool) and tol >= 0):
+        raise EigenInputError(f"tol must be a number ≥ 0 (0: machine precision), got {tol!r}")
+    if not _is_int(seed) or seed < 0:
+        raise EigenInputError(f"seed must be an integer ≥ 0, got {seed!r}")
+    _check_finite("W", lap.W)
+    _check_finite("A", lap.A)
+
+
 def eigenbasis(
     lap: Laplacian,
     k: int,
@@ -62,17 +99,21 @@ def eigenbasis(
 
     Args:
       lap: the Laplacian (``W``, ``A`` of shape ``(n, n)``).
-      k: number of eigenpairs, ``1 ≤ k < n``.
+      k: number of eigenpairs, an integer with ``1 ≤ k < n``.
       sigma: shift (default ``−1e-8·s``, ``s`` a spectral scale).
       tol: ARPACK tolerance (0: machine precision).
       seed: seeds ARPACK's start vector (deterministic results).
 
     Returns:
       ``Eigenbasis(evals (k,), evecs (n, k))``.
+
+    Raises:
+      EigenInputError: (a ``MeshError``) before any work, when ``k`` is not an integer in ``[1, n − 1]``
+        (``bool`` refused; ARPACK needs ``k < n`` and there is no dense fallback), ``sigma`` is not
+        finite, ``tol < 0``, or ``W``/``A`` has NaN/inf entries.
     """
-    n = lap.n
-    if not 1 <= k < n:
-        raise ValueError(f"k must satisfy 1 ≤ k < n = {n}, got k = {k}")
+    _check_inputs(lap, k, sigma, tol, seed)
+    n, k = lap.n, int(k)
     W = sp.csc_matrix(lap.W, dtype=np.float64)
     A = sp.csc_matrix(lap.A, dtype=np.float64)
     if sigma is None:

@@ -32,6 +32,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from stiefel.sparse_factor import SymmetricFactor
+from stiefel.validation import check_count, check_nonnegative, check_number, check_positive
 
 __all__ = ["ADMMOptions", "ADMMResult", "admm", "admm_sequential", "l1_weights_np", "RhoRule", "soft_threshold"]
 
@@ -46,7 +47,9 @@ class ADMMOptions:
     on this nonconvex problem lowering ρ on a large dual residual (typical while a
     random start smooths out) drove ρ so low that the iteration diverged —,
     ``True``/``"both"`` balances both ways, ``False`` keeps ρ fixed; eps_abs, eps_rel: stopping tolerances;
-    max_iters: iteration limit; variant: ``"exact"`` or ``"thesis"``.
+    max_iters: the total number of iterations of a call (``admm_sequential``: shared fairly by the modes),
+    an integer in ``[1, 2³¹ − 1]``; variant: ``"exact"`` or ``"thesis"``. Checked on construction
+    (``stiefel.ParameterError``).
     """
 
     rho: float | None = None
@@ -59,6 +62,17 @@ class ADMMOptions:
     max_iters: int = 20000
     variant: str = "exact"
     time_limit: float = float("inf")
+
+    def __post_init__(self) -> None:
+        if self.rho is not None:
+            check_positive("rho", self.rho)
+        check_number("rho_ratio", self.rho_ratio, low=1)
+        check_number("rho_tau", self.rho_tau, low=1, low_open=True)
+        check_count("adapt_every", self.adapt_every)
+        check_nonnegative("eps_abs", self.eps_abs)
+        check_nonnegative("eps_rel", self.eps_rel)
+        check_count("max_iters", self.max_iters)
+        check_positive("time_limit", self.time_limit, finite=False)
 
 
 @dataclasses.dataclass
@@ -211,6 +225,8 @@ def admm(W, area_diag, k: int, mu: float, *, weighting: str = "area", Psi0=None,
     W = sp.csr_matrix(W, dtype=np.float64)
     a = np.asarray(area_diag, dtype=np.float64)
     n = a.shape[0]
+    check_count("k", k, 1, n, high_label=f"n = {n}")
+    check_nonnegative("mu", mu)
     w = l1_weights_np(a, weighting)
     exact = options.variant == "exact"
     if options.variant not in ("exact", "thesis"):
@@ -277,11 +293,16 @@ def admm_sequential(W, area_diag, k: int, mu: float, *, weighting: str = "area",
     """Sequential ADMM (§3.2.2, end): one mode at a time with ``ψᵀAΨ_prev = 0``.
 
     The Ψ-step for one column is the A-closest unit vector A-orthogonal to the previous
-    modes: ``ψ = normalise_A((I − ΦΦᵀA) y)``.
+    modes: ``ψ = normalise_A((I − ΦΦᵀA) y)``. ``options.max_iters`` is the total over all modes, shared
+    fairly: mode j may use ⌈left / (k − j)⌉ of the iterations modes 0 … j−1 left (what a mode leaves
+    rolls over); a mode stopped by its share ends with status ``"max_iters"``, and one that gets no
+    iteration is its projected start.
     """
     W = sp.csr_matrix(W, dtype=np.float64)
     a = np.asarray(area_diag, dtype=np.float64)
     n = a.shape[0]
+    check_count("k", k, 1, n, high_label=f"n = {n}")
+    check_nonnegative("mu", mu)
     w = l1_weights_np(a, weighting)
     if options.variant != "exact":
         raise ValueError("sequential ADMM is implemented in the exact (A-weighted) form only")
@@ -305,7 +326,9 @@ def admm_sequential(W, area_diag, k: int, mu: float, *, weighting: str = "area",
         rho = float(options.rho if options.rho is not None else max(mu, 1.0))
         col_status = "max_iters"
         rule = RhoRule(options)
-        for it in range(1, options.max_iters + 1):
+        it = 0
+        share = -(-(options.max_iters - total_it) // (k - j))  # ⌈left / modes to go⌉
+        for it in range(1, share + 1):
             psi = project(0.5 * (e - ue + s - us))
             e_old, s_old = e, s
             e = estep.solve(rho, rho * a * (psi + ue))

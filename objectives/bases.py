@@ -27,7 +27,9 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from stiefel.errors import ShapeError
 from stiefel.sparse_factor import SymmetricFactor
+from stiefel.validation import (check_count, check_finite, check_nonnegative, check_number, check_unit_interval)
 
 from .evaluation import per_vertex_error, reconstruct
 
@@ -62,7 +64,8 @@ def _as_csc(X, n: int | None = None, name: str = "matrix") -> sp.csc_matrix:
             X = sp.csc_matrix(X)
     X = sp.csc_matrix(X, dtype=np.float64)
     if X.shape[0] != X.shape[1] or (n is not None and X.shape[0] != n):
-        raise ValueError(f"{name} has shape {X.shape}; expected ({n}, {n}) to match W")
+        raise ShapeError(f"{name} has shape {X.shape}; expected ({n}, {n}) to match W")
+    check_finite(name, X)
     return X
 
 
@@ -110,13 +113,22 @@ def glmh(W, A, k: int, *, mu_V: float = 0.0, V=None, mu_perp: float = 0.0, Phi=N
 
     Returns:
       ``BasisResult(evals (k,), Psi (n, k))``, ascending, ``ΨᵀMΨ = I``.
+
+    Checked before any work: ``ParameterError`` (k an integer in ``[1, n − 1]`` — ARPACK needs
+    ``k < n``; μ's and σ finite, ``μ_⊥ ≥ 0``, ``tol ≥ 0``), ``NonFiniteError`` (W, A, M, V, Φ),
+    ``ShapeError``.
     """
     W = _as_csc(W, name="W")
     n = W.shape[0]
     A = _as_csc(A, n, "A")
     M = A if M is None else _as_csc(M, n, "M")
-    if not 1 <= k < n:
-        raise ValueError(f"k must satisfy 1 ≤ k < n = {n}, got k = {k}")
+    check_count("k", k, 1, n - 1, high_label=f"n − 1 = {n - 1} (ARPACK's eigsh needs k < n)")
+    check_number("mu_V", mu_V)
+    check_nonnegative("mu_perp", mu_perp)
+    check_nonnegative("tol", tol)
+    check_count("seed", seed, 0)
+    if sigma is not None:
+        check_number("sigma", sigma)
     K = sp.csc_matrix(W)
     vmin = 0.0
     if mu_V != 0.0:
@@ -124,7 +136,8 @@ def glmh(W, A, k: int, *, mu_V: float = 0.0, V=None, mu_perp: float = 0.0, Phi=N
             raise ValueError("mu_V ≠ 0 needs a potential V of shape (n,)")
         V = np.asarray(V, dtype=np.float64).reshape(-1)
         if V.shape != (n,):
-            raise ValueError(f"potential V has shape {V.shape}; expected ({n},)")
+            raise ShapeError(f"potential V has shape {V.shape}; expected ({n},)")
+        check_finite("V", V)
         AV = A @ sp.diags(V)
         K = sp.csc_matrix(K + mu_V * 0.5 * (AV + AV.T))
         vmin = float(np.min(mu_V * V))
@@ -134,9 +147,8 @@ def glmh(W, A, k: int, *, mu_V: float = 0.0, V=None, mu_perp: float = 0.0, Phi=N
             raise ValueError("mu_perp ≠ 0 needs the basis Phi of shape (n, r)")
         Phi = np.asarray(Phi, dtype=np.float64)
         if Phi.ndim != 2 or Phi.shape[0] != n:
-            raise ValueError(f"Phi has shape {Phi.shape}; expected ({n}, r)")
-        if mu_perp < 0:
-            raise ValueError("mu_perp must be ≥ 0 (a penalty); the Woodbury shift-invert assumes it")
+            raise ShapeError(f"Phi has shape {Phi.shape}; expected ({n}, r)")
+        check_finite("Phi", Phi)
         B = np.asarray(A @ Phi)  # (n, r)
     if sigma is None:
         scale = float(np.max(np.abs(W.diagonal()) / np.maximum(np.abs(M.diagonal()), np.finfo(float).tiny)))
@@ -212,6 +224,9 @@ def region_from_reconstruction(A, Phi, F, *, threshold: float | None = None, qua
     Returns:
       ``(u (n,) bool indicator of R, v (n,) = (1 − u)² penalty, e (n,) per-vertex errors)``.
     """
+    check_unit_interval("quantile", quantile, closed=True)
+    if threshold is not None:
+        check_number("threshold", threshold)
     F = _default_functions(F)
     R, _ = reconstruct(F, Phi, A, method=method)
     e = per_vertex_error(F, R)

@@ -36,7 +36,9 @@ import scipy.sparse as sp
 from jaxtyping import Array, ArrayLike, Float
 
 import stiefel
+from stiefel.errors import ParameterError, ShapeError
 from stiefel.operators import SparseOperator
+from stiefel.validation import check_count, check_finite, check_full_rank, check_number, check_positive
 
 from .cmm import first_eigenpairs, unpack_laplacian
 from .energies import CMMEnergy, cmm_energy
@@ -113,8 +115,11 @@ def cmm_problem(lap, k: int, *, smoothing: str = "f6", weighting: str = "area",
     k ≤ 2), as in ``compressed_modes``.
     """
     if preconditioner not in PRECONDITIONERS:
-        raise ValueError(f"preconditioner must be one of {PRECONDITIONERS}, got {preconditioner!r}")
+        raise ParameterError(f"preconditioner must be one of {PRECONDITIONERS}, got {preconditioner!r}")
     W, a = unpack_laplacian(lap)
+    check_count("k", k, 1, a.shape[0], high_label=f"n = {a.shape[0]}")
+    if sigma is not None:
+        check_positive("sigma", sigma)
     dtype = np.dtype(dtype or (jnp.float64 if jax.config.jax_enable_x64 else jnp.float32))
     evals, evecs = first_eigenpairs(W, a, max(k, 2))
     sigma = float(max(evals[-1], 1e-12)) if sigma is None else float(sigma)
@@ -129,6 +134,21 @@ def cmm_problem(lap, k: int, *, smoothing: str = "f6", weighting: str = "area",
     else:
         precond = None
     return CMMProblem(energy, manifold, precond), evecs[:, :k]
+
+
+def _check_batch(mus, eps, delta, starts, a, k: int) -> None:
+    """μ ≥ 0, ε, δ > 0 (finite) per member; starts finite with A-independent columns."""
+    for name, values, low_open in (("mus", mus, False), ("eps", eps, True), ("delta", delta, True)):
+        for i, v in enumerate(np.ravel(values)):
+            check_number(f"{name}[{i}]" if np.ndim(values) else name, float(v), low=0, low_open=low_open)
+    if starts is None:
+        return
+    X = np.asarray(starts, dtype=np.float64)
+    check_finite("starts", X)
+    if X.ndim not in (2, 3) or X.shape[-2:] != (a.shape[0], k):
+        raise ShapeError(f"starts must be (n, k) or (B, n, k) with (n, k) = {(a.shape[0], k)}, got shape {X.shape}")
+    for i, Xi in enumerate(X.reshape((-1,) + X.shape[-2:])):
+        check_full_rank(f"starts[{i}]" if X.ndim == 3 else "starts", Xi.T @ (a[:, None] * Xi), metric="A")
 
 
 def _broadcast(mus, eps, delta, starts, default_start, batch):
@@ -177,7 +197,8 @@ def cmm_batch(
       preconditioner: ``"shifted"`` ((W + σA)⁻¹, sparse LDLᵀ on the host), ``"jacobi"`` (its
         diagonal, pure JAX) or None.
       sigma: σ; default the largest of the first k eigenvalues (as ``compressed_modes``).
-      options: ``stiefel.BlockOptions`` (default ``default_options()``).
+      options: ``stiefel.BlockOptions`` (default ``default_options()``); ``options.max_iters`` caps each
+        member's solve (one solve per member: the total of its iterations).
       mode: ``"vmap"`` (one vmapped program) or ``"loop"`` (the single-problem program,
         compiled once, called B times from Python).
       callback_vmap: ``"sequential"`` or ``"expand_dims"``: how the sparse-solve host callback is
@@ -186,13 +207,20 @@ def cmm_batch(
 
     Returns:
       ``BatchResult`` with ``(B, ...)`` stacked arrays; compile time reported apart.
+
+    Checked before any work: ``ParameterError`` (k, μ ≥ 0, ε, δ > 0, σ > 0, options), ``NonFiniteError``
+    and ``RankDeficientError`` for the starts.
     """
     if mode not in ("vmap", "loop"):
-        raise ValueError(f"mode must be 'vmap' or 'loop', got {mode!r}")
+        raise ParameterError(f"mode must be 'vmap' or 'loop', got {mode!r}")
     options = options or default_options()
+    if not isinstance(options, stiefel.BlockOptions):
+        raise ParameterError(f"options must be a stiefel.BlockOptions (e.g. default_options(...)), got {options!r}")
     names = [smoothing] if isinstance(smoothing, str) else list(smoothing)
     B_smooth = 0 if isinstance(smoothing, str) else len(names)
     W, a = unpack_laplacian(lap)
+    check_count("k", k, 1, a.shape[0], high_label=f"n = {a.shape[0]}")
+    _check_batch(mus, eps, delta, starts, a, k)
     problem, X_eig = cmm_problem((W, a), k, smoothing=names[0], weighting=weighting, preconditioner=preconditioner,
                                  sigma=sigma, dtype=dtype, callback_vmap=callback_vmap)
     mus_b, eps_b, delta_b, starts_b = _broadcast(mus, eps, delta, starts, X_eig, B_smooth)

@@ -29,10 +29,14 @@ import time
 from typing import Callable
 
 import numpy as np
+import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from stiefel.errors import NotSPDError, ParameterError, ShapeError
 from stiefel.sparse_factor import SymmetricFactor
+from stiefel.validation import (check_count, check_finite, check_full_rank, check_nonnegative, check_number,
+                                check_positive, check_unit_interval)
 
 from .admm import l1_weights_np, orthonormalize
 from .cmm_base import _no_callback
@@ -42,6 +46,7 @@ __all__ = ["CMMResult", "compressed_modes", "select_mu", "METHODS", "unpack_lapl
 
 METHODS = tuple(SOLVERS)  # the solvers' names, CMMResult.method
 WEIGHTINGS = ("area", "uniform")
+SPARSITY_THRESHOLDS = ("1e-6", "1e-3")  # the keys of CMMResult.sparsity
 
 
 @dataclasses.dataclass
@@ -77,23 +82,31 @@ class CMMResult:
 
 
 def unpack_laplacian(lap):
-    """``(W csr, a (n,))`` from a Laplacian object (``.W``, ``.A``) or a ``(W, A)`` pair."""
+    """``(W csr, a (n,))`` from a Laplacian object (``.W``, ``.A``) or a ``(W, A)`` pair.
+
+    Raises ``ShapeError`` (sizes), ``NonFiniteError`` (NaN/inf in W or A), ``ParameterError`` (A not
+    diagonal), ``NotSPDError`` (a non-positive area) — all ``stiefel.StiefelError``, hence ``ValueError``.
+    """
     if isinstance(lap, tuple):
         W, A = lap
     else:
         W, A = lap.W, lap.A
     W = sp.csr_array(W, dtype=np.float64)
+    check_finite("W", W)
     if sp.issparse(A):
+        check_finite("A", A)
         if sp.csr_array(A - sp.diags_array(A.diagonal())).count_nonzero() > 0:
-            raise ValueError("compressed_modes needs a diagonal (lumped) area matrix A; use a lumped mass")
+            raise ParameterError("compressed_modes needs a diagonal (lumped) area matrix A; use a lumped mass")
         a = np.asarray(A.diagonal(), dtype=np.float64)
     else:
         A = np.asarray(A, dtype=np.float64)
+        check_finite("A", A)
         a = A if A.ndim == 1 else np.diag(A)
     if W.shape[0] != W.shape[1] or W.shape[0] != a.shape[0]:
-        raise ValueError(f"W {W.shape} and A ({a.shape[0]}) do not match")
-    if np.any(a <= 0) or not np.all(np.isfinite(a)):
-        raise ValueError("the area matrix must have positive, finite diagonal entries")
+        raise ShapeError(f"W {W.shape} and A ({a.shape[0]}) do not match")
+    if np.any(a <= 0):
+        i = int(np.argmin(a))
+        raise NotSPDError(f"the area matrix must have positive diagonal entries, got A[{i}, {i}] = {a[i]:.3e}")
     return W, a
 
 
@@ -102,13 +115,20 @@ def first_eigenpairs(W, a, k):
 
     Deterministic: a fixed Lanczos start vector and a sign convention (the largest-magnitude
     entry of each column is positive), so repeated calls give the same start for the solvers.
+    ARPACK needs ``k < n``; ``k = n`` (all eigenpairs of a tiny problem) falls back to a dense
+    ``scipy.linalg.eigh``.
     """
-    scale = float(abs(W).sum() / W.shape[0]) / float(np.mean(a))
-    v0 = np.random.default_rng(0).standard_normal(W.shape[0])  # deterministic: same start, same result
-    sigma = -1e-8 * scale
-    A = sp.diags_array(a).tocsc()
-    OPinv = SymmetricFactor(sp.csc_array(W) - sigma * A, check=False).as_linear_operator()
-    vals, vecs = spla.eigsh(sp.csc_array(W), k=k, M=A, sigma=sigma, which="LM", v0=v0, OPinv=OPinv)
+    n = W.shape[0]
+    check_count("k (eigenpairs)", k, 1, n, high_label=f"n = {n}")
+    if k == n:  # ARPACK cannot return all n eigenpairs; n ≤ k is tiny, dense is fine
+        vals, vecs = sla.eigh(sp.csr_array(W).toarray(), np.diag(a))
+    else:
+        scale = float(abs(W).sum() / n) / float(np.mean(a))
+        v0 = np.random.default_rng(0).standard_normal(n)  # deterministic: same start, same result
+        sigma = -1e-8 * scale
+        A = sp.diags_array(a).tocsc()
+        OPinv = SymmetricFactor(sp.csc_array(W) - sigma * A, check=False).as_linear_operator()
+        vals, vecs = spla.eigsh(sp.csc_array(W), k=k, M=A, sigma=sigma, which="LM", v0=v0, OPinv=OPinv)
     order = np.argsort(vals)
     vals, vecs = vals[order], vecs[:, order]
     peak = vecs[np.argmax(np.abs(vecs), axis=0), np.arange(vecs.shape[1])]
@@ -130,15 +150,22 @@ def _diagnostics(W, a, mu, weighting, Psi):
 
 
 def _start_kind(start, n: int, k: int) -> str:
-    """``"eigen"``, ``"random"`` or ``"array"`` (an ``(n, k)`` array), else a ValueError."""
+    """``"eigen"``, ``"random"`` or ``"array"`` (an ``(n, k)`` array)."""
     if isinstance(start, str):
         if start not in ("eigen", "random"):
-            raise ValueError(f"unknown start {start!r}; 'eigen', 'random' or an (n, k) array")
+            raise ParameterError(f"unknown start {start!r}; 'eigen', 'random' or an (n, k) array")
         return start
     shape = np.shape(start)
     if shape != (n, k):
-        raise ValueError(f"start must have shape {(n, k)}, got {shape}")
+        raise ShapeError(f"start must have shape {(n, k)}, got {shape}")
     return "array"
+
+
+def _check_start(X, a) -> None:
+    """An array start: finite, with columns linearly independent in A (else no solver can use it)."""
+    X = np.asarray(X, dtype=np.float64)
+    check_finite("start", X)
+    check_full_rank("start", X.T @ (a[:, None] * X), metric="A")
 
 
 def compressed_modes(
@@ -156,8 +183,8 @@ def compressed_modes(
     """Compressed manifold modes of a Laplacian ``(W, A)``.
 
     Args:
-      lap: ``mesh.Laplacian`` (``.W``, ``.A``) or a pair ``(W, A)`` (A diagonal).
-      k: number of modes; mu: sparsity weight μ ≥ 0 (absolute).
+      lap: ``mesh.Laplacian`` (``.W``, ``.A``) or a pair ``(W, A)`` (A diagonal, positive; finite entries).
+      k: number of modes, an integer in ``[1, n]``; mu: sparsity weight μ ≥ 0 (absolute).
       solver: ``BlockCMM`` (default), ``SequentialCMM``, ``ADMMCMM``, ``SequentialADMMCMM`` or
         ``FastCMM(U)`` (``objectives.cmm_solvers``), with its options.
       weighting: ``"area"`` or ``"uniform"`` ℓ1 weights (MATH.md §4).
@@ -169,6 +196,10 @@ def compressed_modes(
         solvers run in float64 on the host.
       callback: ``callback(j, info)`` after each finished column, for solvers with
         ``supports_callback`` (``SequentialCMM``).
+
+    Everything is checked before any work: ``ParameterError`` / ``SolverOptionError`` for options,
+    ``NonFiniteError`` for NaN/inf in W, A or the start, ``RankDeficientError`` for a start whose
+    columns are linearly dependent in A (the numerical rank is in the message).
     """
     if not isinstance(solver, CMMSolver):
         hint = f"; use {SOLVERS[solver].__name__}(...)" if isinstance(solver, str) and solver in SOLVERS else ""
@@ -176,15 +207,18 @@ def compressed_modes(
         raise SolverOptionError(f"solver must be a CMM solver object ({names}), got {solver!r}{hint}")
     W, a = unpack_laplacian(lap)
     n = a.shape[0]
-    if not 1 <= k <= n:
-        raise ValueError(f"k must satisfy 1 ≤ k ≤ n = {n}, got {k}")
-    if not (np.isfinite(mu) and mu >= 0):
-        raise ValueError(f"mu must be a finite non-negative number, got {mu}")
+    if n < 2:
+        raise ShapeError(f"compressed_modes needs a Laplacian of at least 2 vertices, got n = {n}")
+    k = check_count("k", k, 1, n, high_label=f"n = {n}")
+    check_nonnegative("mu", mu)
+    check_count("seed", seed, 0)
     if weighting not in WEIGHTINGS:
-        raise ValueError(f"unknown weighting {weighting!r}; choose one of {WEIGHTINGS}")
+        raise ParameterError(f"unknown weighting {weighting!r}; choose one of {WEIGHTINGS}")
     kind = _start_kind(start, n, k)
     if solver.restricted and kind == "array":
         raise SolverOptionError(f"{type(solver).__name__} builds its start in span(U): use start='eigen' or 'random'")
+    if kind == "array":
+        _check_start(start, a)
     if not solver.supports_callback:
         _no_callback(solver, callback)
     t_setup = time.perf_counter()
@@ -220,17 +254,25 @@ def select_mu(lap, k: int, target_sparsity: float, *, threshold: str = "1e-3", m
     Args:
       lap, k: as in ``compressed_modes``; target_sparsity: in (0, 1).
       mu_lo, mu_hi: initial bracket (default ``1e-3·n`` and ``1·n``); widened by ×10 steps if needed.
-      tol: stop when ``|sparsity − target| ≤ tol``; max_evals: solve budget.
+      tol: stop when ``|sparsity − target| ≤ tol`` (in [0, 1)); max_evals: solve budget (≥ 2: the
+        bracket's two ends are always solved).
+      threshold: ``"1e-6"`` or ``"1e-3"`` (a key of ``CMMResult.sparsity``).
       kwargs: passed to ``compressed_modes`` (``solver=``, ``weighting=``, ``dtype=``, ...).
     Returns:
       ``(mu, CMMResult, trials)`` with ``trials`` a list of ``(mu, sparsity, objective)``.
     """
-    if not 0.0 < target_sparsity < 1.0:
-        raise ValueError("target_sparsity must lie in (0, 1)")
+    check_unit_interval("target_sparsity", target_sparsity)
+    if threshold not in SPARSITY_THRESHOLDS:
+        raise ParameterError(f"unknown threshold {threshold!r}; choose one of {SPARSITY_THRESHOLDS}")
+    check_number("tol", tol, low=0, high=1, high_open=True)
+    check_count("max_evals", max_evals, 2)
     W, a = unpack_laplacian(lap)
     n = a.shape[0]
-    lo = mu_lo if mu_lo is not None else 1e-3 * n
-    hi = mu_hi if mu_hi is not None else 1.0 * n
+    check_count("k", k, 1, n, high_label=f"n = {n}")
+    lo = check_positive("mu_lo", mu_lo) if mu_lo is not None else 1e-3 * n
+    hi = check_positive("mu_hi", mu_hi) if mu_hi is not None else 1.0 * n
+    if not lo < hi:
+        raise ParameterError(f"the bracket needs mu_lo < mu_hi, got mu_lo = {lo!r}, mu_hi = {hi!r}")
     trials: list = []
     results: dict = {}
 

@@ -31,7 +31,9 @@ class _ADMMSolver(CMMSolver):
     eigenbasis start's eigenvalues — the modes' spectrum; too small a ρ diverges —, else ``max(μ, 1)``),
     residual balancing ``adapt_rho`` (``"increase"``, ``True``/``"both"``, ``False``) by ``rho_tau`` when
     one residual exceeds ``rho_ratio`` times the other, at most every ``adapt_every`` iterations;
-    stopping ``eps_abs``, ``eps_rel``, ``max_iters``, ``time_limit`` (s). Host numpy/scipy, float64."""
+    stopping ``eps_abs``, ``eps_rel``, ``time_limit`` (s) and ``max_iters``, the total number of ADMM
+    iterations of the solve (an integer in ``[1, 2³¹ − 1]``; ``SequentialADMMCMM``'s modes share it
+    fairly). Host numpy/scipy, float64."""
 
     rho: float | None = None
     adapt_rho: bool | str = ADMMOptions.adapt_rho
@@ -54,7 +56,7 @@ class _ADMMSolver(CMMSolver):
         _check_number("eps_abs", self.eps_abs, 0)
         _check_number("eps_rel", self.eps_rel, 0)
         _check_int("max_iters", self.max_iters, 1)
-        _check_number("time_limit (seconds; inf: none)", self.time_limit, 0, strict=True)
+        _check_number("time_limit (seconds; inf: none)", self.time_limit, 0, strict=True, finite=False)
 
     def admm_options(self, rho: float | None = None) -> ADMMOptions:
         """These options as ``ADMMOptions`` (``rho`` overrides ``self.rho`` when given)."""
@@ -91,7 +93,9 @@ class ADMMCMM(_ADMMSolver):
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class SequentialADMMCMM(_ADMMSolver):
-    """ADMM one mode at a time with ``ψᵀAΨ_prev = 0`` (``objectives.admm.admm_sequential``, exact form)."""
+    """ADMM one mode at a time with ``ψᵀAΨ_prev = 0`` (``objectives.admm.admm_sequential``, exact form);
+    ``max_iters`` is the total over all modes: mode j may use ⌈left / (k − j)⌉ of what modes 0 … j−1
+    left (unused iterations roll over; status ``max_iters`` when a share runs out)."""
 
     name: ClassVar[str] = "admm_sequential"
 

@@ -9,11 +9,15 @@ from typing import Callable, ClassVar, NamedTuple
 import numpy as np
 from jaxtyping import Float
 
+from stiefel.errors import ParameterError
+from stiefel.validation import INT32_MAX, check_count, check_number
+
 __all__ = ["CMMSolver", "Start", "SolverRun", "SolverOptionError"]
 
 
-class SolverOptionError(ValueError):
-    """A CMM solver option is out of range, or an argument the solver does not take was given."""
+class SolverOptionError(ParameterError):
+    """A CMM solver option is out of range, or an argument the solver does not take was given (a
+    ``stiefel.ParameterError``, hence a ``StiefelError`` and a ``ValueError``)."""
 
 
 def _require(ok: bool, message: str) -> None:
@@ -21,22 +25,18 @@ def _require(ok: bool, message: str) -> None:
         raise SolverOptionError(message)
 
 
-def _is_int(v) -> bool:
-    return isinstance(v, (int, np.integer)) and not isinstance(v, bool)
-
-
 def _is_number(v) -> bool:
     return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
 
 
-def _check_int(name: str, value, low: int) -> None:
-    _require(_is_int(value) and value >= low, f"{name} must be an integer ≥ {low}, got {value!r}")
+def _check_int(name: str, value, low: int, high: int = INT32_MAX) -> None:
+    """``value`` an integer in ``[low, high]`` (``stiefel.validation.check_count``)."""
+    check_count(name, value, low, high, error=SolverOptionError)
 
 
-def _check_number(name: str, value, low: float, *, strict: bool = False) -> None:
-    """``value`` a number ≥ ``low`` (> ``low`` if ``strict``; NaN fails)."""
-    ok = _is_number(value) and (value > low if strict else value >= low)
-    _require(ok, f"{name} must be a number {'>' if strict else '≥'} {low}, got {value!r}")
+def _check_number(name: str, value, low: float, *, strict: bool = False, finite: bool = True) -> None:
+    """``value`` a number ≥ ``low`` (> ``low`` if ``strict``; NaN fails; ±inf fails unless ``finite=False``)."""
+    check_number(name, value, low=low, low_open=strict, finite=finite, error=SolverOptionError)
 
 
 class Start(NamedTuple):

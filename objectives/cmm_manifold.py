@@ -18,6 +18,7 @@ import numpy as np
 import scipy.sparse as sp
 
 import stiefel
+from stiefel.minimisers import STALL_WINDOW_MAX
 from stiefel.operators import SparseOperator
 
 from . import smoothings
@@ -40,29 +41,31 @@ def _continuation(eps: float, steps: int, start: float) -> list[float]:
     return list(np.geomspace(start, eps, steps))
 
 
-def _block_rounds(F, manifold, X, P, *, gtol: float, ftol: float, max_iters: int, refresh: int | None = None,
-                  optimizer: str = "cg", ftol_window: int = 20):
-    """Riemannian CG/L-BFGS (``optimizer``) on the block, in one run (fixed ``P``) or in rounds of ``refresh``
-    iterations with an ``ActiveSetPreconditioner`` rebuilt before each round.
+def _block_rounds(F, manifold, X, P, *, gtol: float, ftol: float, max_iters: int, budget: int,
+                  refresh: int | None = None, optimizer: str = "cg", ftol_window: int = 20):
+    """Riemannian CG/L-BFGS (``optimizer``) on the block for at most ``budget ≤ max_iters`` iterations, in one
+    run (fixed ``P``) or in rounds of ``refresh`` iterations with an ``ActiveSetPreconditioner`` rebuilt
+    before each round. ``max_iters`` is the compiled bound (the same for every call: one compilation).
 
     Returns ``(X, iterations, status, run seconds (incl. refreshes), compile seconds,
     history {"time", "value", "monitor"})``; a round that ends converged ends the run.
     """
     if not isinstance(P, ActiveSetPreconditioner):
         res = stiefel.minimize(F, manifold, X, method=optimizer, preconditioner=P, gtol=gtol, ftol=ftol,
-                               ftol_window=ftol_window, max_iters=max_iters, monitor=F.true_value)
+                               ftol_window=ftol_window, max_iters=max_iters, budget=budget, monitor=F.true_value)
         h = res.trimmed_history()
         h["time"] = np.linspace(0.0, res.wall_time, len(h["value"]))
         return res.x, int(res.iterations), res.status_name, res.wall_time, res.compile_time, h
     done, wall, compile_t, status = 0, 0.0, 0.0, "max_iters"
     parts: dict = {"time": [], "value": [], "monitor": []}
-    while done < max_iters:
+    bound = min(refresh, max_iters)
+    while done < budget:
         t0 = time.perf_counter()
         P.refresh(X)
         wall += time.perf_counter() - t0
         res = stiefel.minimize(F, manifold, X, method=optimizer, preconditioner=P.apply, gtol=gtol, ftol=ftol,
-                               ftol_window=ftol_window, max_iters=min(refresh, max_iters - done), monitor=F.true_value,
-                               check=False)
+                               ftol_window=ftol_window, max_iters=bound, budget=min(bound, budget - done),
+                               monitor=F.true_value, check=False)
         h = res.trimmed_history()
         first = 0 if done == 0 else 1  # a later round's entry 0 repeats the previous round's last
         parts["time"].append(wall + np.linspace(0.0, res.wall_time, len(h["value"]))[first:])
@@ -90,8 +93,10 @@ def _shifted_inverse(W, a, sigma: float, dtype):
 class _SmoothedSolver(CMMSolver):
     """Options shared by the manifold solvers: the ℓ1 smoothing (``objectives.smoothings``), whose ε and
     δ both follow a geometric continuation of ``continuation`` stages from ``continuation_start``; the
-    per-stage ``gtol``/``max_iters``; σ of ``(W + σA)⁻¹`` (None: λ_{k−1}, the largest of the first k
-    eigenvalues, λ₁ for k ≤ 2 — the scale of the modes sought, ``bench/RESULTS.md``)."""
+    per-stage ``gtol``; ``max_iters``, the total number of iterations of the solve, shared by the stages
+    in turn (each gets what the earlier ones left; once it is spent the remaining stages are skipped and
+    the status is ``max_iters``), an integer in ``[1, 2³¹ − 1]``; σ of ``(W + σA)⁻¹`` (None: λ_{k−1}, the
+    largest of the first k eigenvalues, λ₁ for k ≤ 2 — the scale of the modes sought, ``bench/RESULTS.md``)."""
 
     smoothing: str = "f6"
     eps: float = 1e-3
@@ -163,7 +168,7 @@ class BlockCMM(_SmoothedSolver):
         super().__post_init__()
         _check_number("ftol", self.ftol, 0)
         # the early stop of the intermediate continuation stages
-        _check_int("stage_window", self.stage_window, 1)
+        _check_int("stage_window", self.stage_window, 1, STALL_WINDOW_MAX)
         _check_number("stage_ftol", self.stage_ftol, 0)
         _require(self.optimizer in OPTIMIZERS, f"unknown optimizer {self.optimizer!r}; choose one of {OPTIMIZERS}")
         _require(self.preconditioner in PRECONDITIONERS,
@@ -182,6 +187,9 @@ class BlockCMM(_SmoothedSolver):
         times, values, true_values = [], [], []
         active = None
         for stage, s in enumerate(schedule):
+            if iters >= self.max_iters:  # the total is spent: the remaining stages are skipped
+                status = "max_iters"
+                break
             F = energy.with_params(eps=s * ratio_e, delta=s * ratio_d)
             # intermediate stages only need the arrangement of the modes: stop once they stall
             last = stage == len(schedule) - 1
@@ -193,7 +201,7 @@ class BlockCMM(_SmoothedSolver):
                 active.set_width(s)
             X, it_stage, st, t_run, t_compile, h = _block_rounds(
                 F, manifold, X, P if P is not None else active, gtol=self.gtol, max_iters=self.max_iters,
-                refresh=self.refresh, optimizer=self.optimizer, **stop)
+                budget=self.max_iters - iters, refresh=self.refresh, optimizer=self.optimizer, **stop)
             iters += it_stage
             first = 0 if stage == 0 else 1  # a later stage's entry 0 is the previous stage's last iterate
             true_values.extend(list(h["monitor"][first:]))
@@ -212,7 +220,9 @@ class BlockCMM(_SmoothedSolver):
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class SequentialCMM(_SmoothedSolver):
     """Thesis Algorithm 6 (``stiefel.minimize_sequential``): CG column by column, preconditioned by
-    ``(W + σA)⁻¹``; ``continuation`` stages (default 1: none) each restart at column 0."""
+    ``(W + σA)⁻¹``; ``continuation`` stages (default 1: none) each restart at column 0. ``max_iters`` is
+    the total over all stages and columns: a stage gets what the earlier stages left, and its columns
+    share that fairly (``stiefel.minimize_sequential``)."""
 
     name: ClassVar[str] = "sequential"
     supports_callback: ClassVar[bool] = True
@@ -226,9 +236,13 @@ class SequentialCMM(_SmoothedSolver):
         iters, wall, compile_t, status = 0, t_factor, 0.0, "converged"
         times, values = [], []
         for s in schedule:
+            if iters >= self.max_iters:  # the total is spent: the remaining stages are skipped
+                status = "max_iters"
+                break
             F = energy.with_params(eps=s * ratio_e, delta=s * ratio_d)
             res = stiefel.minimize_sequential(F, a, k, X0=np.asarray(X), preconditioner=P, gtol=self.gtol,
-                                              max_iters=self.max_iters, dtype=dtype, callback=callback)
+                                              max_iters=self.max_iters, budget=self.max_iters - iters, dtype=dtype,
+                                              callback=callback)
             X = res.x
             iters += int(np.sum(np.asarray(res.iterations)))
             names = set(res.status_names)

@@ -28,6 +28,7 @@ from jax.experimental import sparse as jsparse
 from jaxtyping import Array, Float
 
 import stiefel
+from stiefel.validation import check_count, check_nonnegative, check_positive
 
 from .energies import CMMEnergy, l1_weights
 from . import smoothings as _smoothings
@@ -103,7 +104,10 @@ def cmm_solve(
         solved warm-started, without derivatives.
       preconditioner: ``Y ↦ PY`` (e.g. ``stiefel.shifted_inverse(W₀, A₀, σ).solve`` built from the
         current concrete matrices: a preconditioner need not follow θ); also used by the adjoint.
-      method, gtol, max_iters: the block solver's (``stiefel.minimize``), per stage.
+      method, gtol: the block solver's (``stiefel.minimize``), per stage; max_iters: the total number of
+        iterations of the call, shared by the stages in turn (each gets what the earlier ones left, a
+        runtime budget: one compilation; a last stage left with none ends with status ``max_iters``, and
+        with ``throw`` a derivative through it raises).
       throw: raise on a failed solve / on a derivative through a non-converged last stage.
 
     Returns:
@@ -111,6 +115,14 @@ def cmm_solve(
       ``stiefel.Result``.
     """
     _smoothings.info(smoothing)  # validates the name
+    max_iters = check_count("max_iters", max_iters)
+    check_nonnegative("gtol", gtol)
+    check_nonnegative("mu", mu)  # these three only when concrete (they may be traced)
+    check_positive("eps", eps)
+    if delta is not None:
+        check_positive("delta", delta)
+    for i, width in enumerate(stages):
+        check_positive(f"stages[{i}]", width)
     op = _operator(W)
     area = jnp.asarray(area)
     k = X0.shape[1]
@@ -124,11 +136,15 @@ def cmm_solve(
                        smoothing=_smoothings.info(smoothing).name, weighting=weighting)
     X = jax.lax.stop_gradient(S.project_to_manifold(jnp.asarray(X0, dtype=area.dtype)))
     frozen = jax.lax.stop_gradient(energy)
+    used = jnp.zeros((), jnp.int32)  # iterations of the earlier stages (a runtime value)
     for width in stages:
         F = eqx.tree_at(lambda e: (e.eps, e.delta), frozen, (frozen.eps * width, frozen.delta * width))
         res = stiefel.minimize(F, jax.lax.stop_gradient(S), X, method=method, gtol=gtol, ftol=1e-6, ftol_window=5,
-                               max_iters=max_iters, preconditioner=preconditioner, check=False, throw=throw)
+                               max_iters=max_iters, budget=max_iters - used, preconditioner=preconditioner,
+                               check=False, throw=throw)
         X = jax.lax.stop_gradient(res.x)
+        used = used + jax.lax.stop_gradient(res.iterations).astype(jnp.int32)
     res = stiefel.minimize(energy, S, X, method=method, gtol=gtol, max_iters=max_iters,
-                           preconditioner=preconditioner, check=False, throw=throw)
+                           budget=max_iters - used if stages else None, preconditioner=preconditioner, check=False,
+                           throw=throw)
     return res.x, res

@@ -28,6 +28,7 @@ import scipy.sparse as sp
 
 from stiefel.errors import NotSPDError
 from stiefel.sparse_factor import SymmetricFactor
+from stiefel.validation import check_count, check_nonnegative
 
 from .admm import (ADMMOptions, ADMMResult, RhoRule, _History, _true_objective, l1_weights_np, orthonormalize,
                    soft_threshold)
@@ -68,8 +69,7 @@ def restricted_eigenbasis(Q, M, U, k: int, *, low_rank=None):
         UB = np.asarray(sp.csr_array(U).T @ B)
         Qbar = Qbar + c * (UB @ UB.T)
     d = Qbar.shape[0]
-    if not 1 <= k <= d:
-        raise ValueError(f"k must satisfy 1 ≤ k ≤ d = {d} (the number of local functions)")
+    check_count("k", k, 1, d, high_label=f"d = {d} (the number of local functions)")
     evals, coeffs = sla.eigh(Qbar, Mbar, subset_by_index=(0, k - 1))
     return evals, np.asarray(sp.csr_array(U) @ coeffs), coeffs
 
@@ -99,8 +99,8 @@ def restricted_admm(W, area_diag, U, k: int, mu: float, *, weighting: str = "are
     a = np.asarray(area_diag, dtype=np.float64)
     U = sp.csr_array(U, dtype=np.float64)
     n, d = U.shape
-    if not 1 <= k <= d:
-        raise ValueError(f"k must satisfy 1 ≤ k ≤ d = {d} (the number of local functions)")
+    check_count("k", k, 1, d, high_label=f"d = {d} (the number of local functions)")
+    check_nonnegative("mu", mu)
     w = l1_weights_np(a, weighting)
     Wbar, Abar = _restricted_sparse(W, sp.diags_array(a), U)
     try:

@@ -17,7 +17,8 @@ Public API (MATH.md §1–3):
 * ``as_operator``, ``shifted_inverse`` — SPD operators and preconditioners.
 * ``stiefel.sharding`` — ``row_mesh``, ``shard_rows``, ``solve_sharded``: the block solver with
   ``X`` split by rows over devices (single- or multi-host).
-* Errors: ``StiefelError`` and its subclasses.
+* Errors: ``StiefelError`` and its subclasses (``ParameterError`` for an option out of range,
+  ``NonFiniteError``, ``RankDeficientError``, ...); ``stiefel.validation`` — the checks behind them.
 
 float64: the solvers compute in the dtype of the manifold's operator, which is
 float64 when JAX's x64 mode is on. Library code never changes JAX's global
@@ -33,7 +34,8 @@ from .block_solver import solve as solve_block
 from .hessian import hessian_operator, riemannian_hessian
 from .implicit import RiemannianImplicitAdjoint, riemannian_residual, tangent_solve
 from .minimisers import RiemannianBB, RiemannianCG, RiemannianLBFGS
-from .errors import NotSPDError, OffManifoldError, ShapeError, SolverError, StiefelError
+from .errors import (NonFiniteError, NotSPDError, OffManifoldError, ParameterError, RankDeficientError, ShapeError,
+                     SolverError, StiefelError)
 from .linesearch import LineSearchResult, LineSearchStatus, along_curve, strong_wolfe
 from .manifold import GeneralizedStiefel, skew, sym
 from .operators import DenseOperator, DiagonalOperator, LinearOperator, SparseOperator, as_operator
@@ -47,4 +49,4 @@ from .preconditioning import (
 )
 from .result import History, Result, SequentialResult, Status
 from .sequential import DIRECTIONS, SequentialConstraint, SequentialOptions, minimize_sequential
-from . import sharding
+from . import sharding, validation

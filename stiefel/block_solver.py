@@ -13,11 +13,10 @@ direction. The reported gradient norm is always the manifold metric's, so runs a
 from __future__ import annotations
 
 import dataclasses
-import math
+from types import SimpleNamespace
 from typing import Any, Callable
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
@@ -29,6 +28,7 @@ from .manifold import GeneralizedStiefel
 from .minimisers import STALL_WINDOW_MAX, RiemannianBB, RiemannianCG, RiemannianLBFGS
 from .preconditioning import PRECONDITIONING_MODES, as_preconditioner
 from .result import Result, Status
+from .validation import check_count, check_nonnegative, check_positive, check_unit_interval, check_wolfe
 
 __all__ = ["minimize", "solve", "solver_for", "BlockOptions", "METHODS"]
 
@@ -58,13 +58,24 @@ class BlockOptions:
     def __post_init__(self):
         if self.method not in METHODS:
             raise StiefelError(f"unknown method {self.method!r}; choose one of {METHODS}")
-        if self.method == "lbfgs" and self.memory < 1:
-            raise StiefelError(f"memory must be ≥ 1 for method='lbfgs', got {self.memory}")
-        if self.ftol_window < 1:
-            raise StiefelError(f"ftol_window must be ≥ 1, got {self.ftol_window}")
-        if not (isinstance(self.max_iters, (int, np.integer)) and not isinstance(self.max_iters, bool)
-                and self.max_iters >= 1):
-            raise StiefelError(f"max_iters must be an integer ≥ 1, got {self.max_iters!r}")
+        if self.precondition not in PRECONDITIONING_MODES:
+            raise StiefelError(f"unknown precondition mode {self.precondition!r}; "
+                               f"choose one of {PRECONDITIONING_MODES}")
+        _check_options(self)
+
+
+def _check_options(o) -> None:
+    """Every numeric option of ``BlockOptions`` (or of ``minimize``'s keywords) in range (``ParameterError``)."""
+    check_count("max_iters", o.max_iters)
+    check_count("ls_max_evals", o.ls_max_evals)
+    check_count("ftol_window", o.ftol_window, 1, STALL_WINDOW_MAX)
+    check_count("memory (L-BFGS pairs)", o.memory)
+    for name in ("gtol", "xtol", "ftol"):
+        check_nonnegative(name, getattr(o, name))
+    check_wolfe(o.c1, o.c2)
+    check_positive("init_step", o.init_step)
+    check_positive("max_move", o.max_move, finite=False)
+    check_unit_interval("bb_gamma", o.bb_gamma, closed=True)
 
 
 class _NoArgs(eqx.Module):
@@ -87,15 +98,16 @@ class _Line(eqx.Module):
 
 
 def solver_for(manifold: GeneralizedStiefel, options: BlockOptions, *, F=None, preconditioner=None,
-               monitor=None, stall=None, with_args: bool = False, history: bool = True):
-    """The optimistix minimiser that ``options`` describe (``stall``: traced ``(ftol, ftol_window)``)."""
+               monitor=None, stall=None, with_args: bool = False, history: bool = True, budget=None):
+    """The optimistix minimiser that ``options`` describe (``stall``: traced ``(ftol, ftol_window)``;
+    ``budget``: the runtime iteration limit, ≤ ``options.max_iters``)."""
     o = options
     ftol, window = (o.ftol, o.ftol_window) if stall is None else stall
     line = _Line(F, with_args) if F is not None and callable(getattr(F, "line", None)) else None
     common = dict(rtol=0.0, atol=o.gtol, preconditioner=preconditioner, precondition=o.precondition, c1=o.c1,
                   c2=o.c2, ls_max_evals=int(o.ls_max_evals), init_step=o.init_step, max_move=o.max_move,
                   ftol=ftol, ftol_window=window, stall_test=o.ftol > 0, xtol=o.xtol, monitor=monitor,
-                  history=int(o.max_iters) + 1 if history else 0, line=line)
+                  history=int(o.max_iters) + 1 if history else 0, line=line, budget=budget)
     if o.method == "lbfgs":
         return RiemannianLBFGS(manifold, memory=int(o.memory), **common)
     if o.method == "bb":
@@ -152,6 +164,7 @@ def minimize(
     monitor: Callable | None = None,
     args: Any = None,
     adjoint: optx.AbstractAdjoint | None = None,
+    budget: int | None = None,
 ) -> Result:
     """Minimise ``F(X)`` over ``X ∈ S_M`` from ``X0`` (the whole block at once).
 
@@ -176,7 +189,8 @@ def minimize(
         ``ftol_window`` iterations; 0 disables. For non-smooth objectives under smoothing, where
         the gradient norm stalls above gtol.
       ftol_window: iterations over which ``ftol`` measures the decrease (1 … 64).
-      max_iters: iteration limit (total iterations of this call).
+      max_iters: iteration limit: the total number of iterations of this call, an integer in
+        ``[1, 2³¹ − 1]``; it is also the compiled loop bound (``history`` has ``max_iters + 1`` entries).
       c1, c2: Armijo / curvature constants; ``c2`` defaults to 0.1 for ``"cg"`` (CG needs
         a tighter curvature condition than quasi-Newton methods: with 0.9 it stalled
         in tests), 0.9 for ``"lbfgs"``, and is unused by ``"bb"``; ls_max_evals:
@@ -198,6 +212,12 @@ def minimize(
       adjoint: the ``optx`` adjoint (default ``RiemannianImplicitAdjoint(throw=throw)``; pass
         ``RiemannianImplicitAdjoint(invariant=True)`` for objectives with ``F(XQ) = F(X)``).
         A derivative through a solve that did not converge is NaN, or an error with ``throw``.
+      budget: optional runtime limit ``0 ≤ budget ≤ max_iters`` (may be traced): warm-started stages
+        sharing one total of iterations pass ``max_iters=total, budget=left`` and compile once; the
+        status is ``max_iters`` when the budget ends the run.
+
+    Every option is checked before any work (``ParameterError``, naming the option, its value and
+    its range; ``RankDeficientError`` for a start with dependent columns).
 
     Returns:
       ``Result`` with ``x, value, grad_norm, iterations, status, history, stats,
@@ -207,14 +227,13 @@ def minimize(
         raise StiefelError(f"unknown method {method!r}; choose one of {METHODS}")
     if not isinstance(manifold, GeneralizedStiefel):
         raise StiefelError("manifold must be a stiefel.GeneralizedStiefel")
-    if isinstance(max_iters, bool) or not isinstance(max_iters, (int, np.integer)) or not 1 <= max_iters <= 2**31 - 2:
-        raise StiefelError(f"max_iters must be an integer in [1, 2³¹ − 2], got {max_iters!r}")
-    if isinstance(ftol_window, bool) or not isinstance(ftol_window, (int, np.integer)) \
-            or not 1 <= ftol_window <= STALL_WINDOW_MAX:
-        raise StiefelError(f"ftol_window must be an integer in [1, {STALL_WINDOW_MAX}], got {ftol_window!r}")
-    for name, value in (("gtol", gtol), ("xtol", xtol), ("ftol", ftol)):
-        if not (isinstance(value, (int, float, np.floating)) and math.isfinite(value) and value >= 0):
-            raise StiefelError(f"{name} must be a finite number ≥ 0, got {value!r}")
+    c2 = (0.9 if method == "lbfgs" else 0.1) if c2 is None else c2
+    _check_options(SimpleNamespace(max_iters=max_iters, ls_max_evals=ls_max_evals, ftol_window=ftol_window,
+                                   memory=memory, gtol=gtol, xtol=xtol, ftol=ftol, c1=c1, c2=c2, init_step=init_step,
+                                   max_move=max_move, bb_gamma=bb_gamma))
+    if budget is None:  # always a runtime limit: calls with and without one share a compilation
+        budget = int(max_iters)
+    check_count("budget", budget, 0, int(max_iters), high_label=f"max_iters = {max_iters}")
     if precondition not in PRECONDITIONING_MODES:
         raise StiefelError(f"unknown precondition mode {precondition!r}; choose one of {PRECONDITIONING_MODES}")
     X0 = jnp.asarray(X0, dtype=manifold.dtype)
@@ -222,13 +241,13 @@ def minimize(
     if check and not is_traced(X0):
         manifold.check_point(X0, atol=max(1e-8, 1e3 * float(jnp.finfo(manifold.dtype).eps)))
     P = as_preconditioner(preconditioner)
-    c2 = (0.9 if method == "lbfgs" else 0.1) if c2 is None else c2
     opts = BlockOptions(method=method, gtol=float(gtol), xtol=float(xtol), max_iters=int(max_iters), c1=float(c1),
                         c2=float(c2), ls_max_evals=int(ls_max_evals), init_step=float(init_step),
                         max_move=float(max_move), bb_gamma=float(bb_gamma), precondition=precondition,
                         ftol=float(ftol), ftol_window=int(ftol_window), memory=int(memory))
     # tolerances, line-search constants and the stall window are traced leaves: no recompilation when they change
-    solver = solver_for(manifold, opts, F=F, preconditioner=P, monitor=monitor, with_args=args is not None)
+    solver = solver_for(manifold, opts, F=F, preconditioner=P, monitor=monitor, with_args=args is not None,
+                        budget=budget)
     fn = _NoArgs(F) if args is None else F
     adjoint = adjoint if adjoint is not None else RiemannianImplicitAdjoint(throw=throw)
     if traced:  # inside jax.grad / jax.jvp / jit: no ahead-of-time timing, no host-side checks

@@ -74,6 +74,13 @@ def _converged_grad(solver, gn, F):
     return gn <= solver.atol + solver.rtol * jnp.abs(F)
 
 
+def _out_of_budget(solver, status, it):
+    """``MAX_ITERS`` for a running status once ``it`` iterations used up the solver's runtime budget."""
+    if solver.budget is None:
+        return status
+    return jnp.where((status < 0) & (it >= solver.budget), Status.MAX_ITERS, status).astype(jnp.int32)
+
+
 def _watch(solver, X):
     return jnp.nan if solver.monitor is None else solver.monitor(X)
 
@@ -88,12 +95,13 @@ def init_state(solver, fn, X0, args) -> State:
     hist = History.empty(max(solver.history, 1), dtype).record(0, F0, gn0, 0.0, _watch(solver, X0))
     finite0 = jnp.isfinite(F0) & jnp.all(jnp.isfinite(G0))
     status0 = jnp.where(~finite0, Status.NON_FINITE, jnp.where(_converged_grad(solver, gn0, F0), Status.CONVERGED, -1))
+    status0 = _out_of_budget(solver, jnp.asarray(status0, jnp.int32), 0)
     m = solver.memory_size if solver.method != "lbfgs" else solver.memory
     zero_i = jnp.zeros((), jnp.int32)
     return State(
         X=X0, F=F0, G=R0, xi=xi0, gnorm=gn0, eta=-xi0,
         step=jnp.asarray(solver.init_step, dtype) / jnp.maximum(S.norm(X0, xi0), jnp.finfo(dtype).tiny),
-        F_prev=F0, C=F0, Q=jnp.ones((), dtype), it=zero_i, status=jnp.asarray(status0, jnp.int32), history=hist,
+        F_prev=F0, C=F0, Q=jnp.ones((), dtype), it=zero_i, status=status0, history=hist,
         recent=jnp.full((STALL_WINDOW_MAX,), F0, dtype), n_fevals=jnp.ones((), jnp.int32), n_restarts=zero_i,
         S_mem=jnp.zeros((m,) + X0.shape, dtype), Y_mem=jnp.zeros((m,) + X0.shape, dtype),
         rho_mem=jnp.zeros((m,), dtype), n_mem=zero_i, n_pairs=zero_i, aux=aux0,
@@ -221,6 +229,7 @@ def step(solver, fn, args, c: State) -> State:
     retry = ~ok & ~restart if method != "bb" else jnp.zeros((), bool)
     status = jnp.where(retry, -1, jnp.where(~ok, Status.LINE_SEARCH_FAILED, jnp.where(
         ~finite, Status.NON_FINITE, jnp.where(conv, Status.CONVERGED, -1)))).astype(jnp.int32)
+    status = _out_of_budget(solver, status, it)
     eta_next, step_next, C_next, Q_next = c.eta, tau, F_new, c.Q
     if method == "cg":
         T_xi, T_eta = S.transport_pair(X_new, c.xi, eta_used)

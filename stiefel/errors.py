@@ -7,8 +7,16 @@ class StiefelError(ValueError):
     """Base class for bad input to the manifold layer."""
 
 
+class ParameterError(StiefelError):
+    """An option is of the wrong type or out of its range (e.g. ``max_iters=0``, ``c1 > c2``, a NaN tolerance)."""
+
+
 class NotSPDError(StiefelError):
     """``M`` is not symmetric positive definite (or not symmetric at all)."""
+
+
+class NonFiniteError(StiefelError):
+    """A matrix or array given as input has NaN or infinite entries."""
 
 
 class ShapeError(StiefelError):
@@ -17,6 +25,10 @@ class ShapeError(StiefelError):
 
 class OffManifoldError(StiefelError):
     """A start point does not satisfy ``XᵀMX = I``; see ``GeneralizedStiefel.project_to_manifold``."""
+
+
+class RankDeficientError(OffManifoldError):
+    """A start's columns are linearly dependent in the M inner product: no point of the manifold is near it."""
 
 
 class SolverError(StiefelError):

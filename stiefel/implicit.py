@@ -55,6 +55,7 @@ import optimistix as optx
 
 from .manifold import sym
 from .result import Status
+from .validation import check_count, check_positive
 
 __all__ = ["RiemannianImplicitAdjoint", "riemannian_residual", "tangent_solve"]
 
@@ -162,6 +163,11 @@ class RiemannianImplicitAdjoint(optx.AbstractAdjoint):
     tol: float = eqx.field(static=True, default=1e-10)
     max_steps: int | None = eqx.field(static=True, default=None)
     throw: bool = eqx.field(static=True, default=True)
+
+    def __check_init__(self):
+        check_positive("tol", self.tol)
+        if self.max_steps is not None:
+            check_count("max_steps", self.max_steps)
 
     def apply(self, primal_fn, rewrite_fn, inputs, tags):
         del rewrite_fn, tags

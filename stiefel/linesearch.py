@@ -31,6 +31,9 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
+from .validation import (check_count, check_nonnegative, check_number, check_positive, check_unit_interval,
+                         check_wolfe)
+
 __all__ = ["LineSearchStatus", "LineSearchResult", "strong_wolfe", "along_curve"]
 
 
@@ -139,7 +142,20 @@ def strong_wolfe(
       A ``LineSearchResult``; ``status`` says which conditions held
       (``LineSearchStatus``). A non-descent direction or a failed search gives
       ``step = 0`` and a status, never a NaN.
+
+    Concrete options are checked (``ParameterError``): ``0 < c1 < c2 < 1``, ``init_step > 0``,
+    ``max_step > 0``, counts ≥ 1, ``extrapolation > 1``, ``0 < backtrack_factor < 1``,
+    ``approx_tol ≥ 0``, ``0 < approx_c2 < 1``; traced ones (inside a solver's loop) are not.
     """
+    check_wolfe(c1, c2)
+    check_positive("init_step", init_step)
+    check_positive("max_step", max_step, finite=False)
+    check_count("max_evals", max_evals)
+    check_count("max_backtrack", max_backtrack, 0)
+    check_number("extrapolation", extrapolation, low=1, low_open=True)
+    check_unit_interval("backtrack_factor", backtrack_factor)
+    check_nonnegative("approx_tol", approx_tol)
+    check_unit_interval("approx_c2", approx_c2)
     dtype = jnp.result_type(phi0, dphi0, float)
     phi0 = jnp.asarray(phi0, dtype)
     dphi0 = jnp.asarray(dphi0, dtype)

@@ -11,6 +11,7 @@ from jaxtyping import Array, Float, PRNGKeyArray
 from .errors import OffManifoldError, ShapeError, StiefelError
 from .operators import LinearOperator, as_operator
 from .retractions import BLOCK_RETRACTIONS, RETRACTIONS, _inv_sqrt_spd
+from .validation import check_full_rank, is_integer
 
 __all__ = ["GeneralizedStiefel", "sym", "skew"]
 
@@ -55,7 +56,7 @@ class GeneralizedStiefel(eqx.Module):
                  check: bool = True, dtype=None):
         op = as_operator(M, check=check, dtype=dtype)
         n = op.n
-        if not isinstance(k, (int, np.integer)) or not 1 <= int(k) <= n:
+        if not is_integer(k) or not 1 <= int(k) <= n:
             raise ShapeError(f"k must be an integer with 1 ≤ k ≤ n = {n}, got k = {k!r}")
         if metric not in METRICS:
             raise StiefelError(f"unknown metric {metric!r}; choose one of {METRICS}")
@@ -136,8 +137,14 @@ class GeneralizedStiefel(eqx.Module):
 
     # --- points ------------------------------------------------------------------------------
     def project_to_manifold(self, Y: Point) -> Point:
-        """The M-closest point of ``S_M`` to a full-rank ``Y``: ``Y (YᵀMY)^{-1/2}``."""
-        return Y @ _inv_sqrt_spd(Y.T @ self.op.mv(Y))
+        """The M-closest point of ``S_M`` to a full-rank ``Y``: ``Y (YᵀMY)^{-1/2}``.
+
+        A concrete ``Y`` (not traced) whose columns are linearly dependent in the M inner product
+        raises ``RankDeficientError`` with its numerical rank (``stiefel.validation.check_full_rank``).
+        """
+        G = Y.T @ self.op.mv(Y)
+        check_full_rank("Y", G)
+        return Y @ _inv_sqrt_spd(G)
 
     def random_point(self, key: PRNGKeyArray) -> Point:
         """A random point (Gaussian ``Y`` projected to the manifold)."""
@@ -154,7 +161,8 @@ class GeneralizedStiefel(eqx.Module):
         return jnp.max(jnp.abs(X.T @ self.op.mv(X) - jnp.eye(X.shape[1], dtype=X.dtype)))
 
     def check_point(self, X, *, atol: float = 1e-8, name: str = "X0") -> None:
-        """Raise ``ShapeError``/``OffManifoldError`` unless ``X`` is an ``(n, k)`` point of S_M (host-side)."""
+        """Raise ``ShapeError``/``OffManifoldError`` unless ``X`` is an ``(n, k)`` point of S_M (host-side);
+        ``RankDeficientError`` (an ``OffManifoldError``) names a start with dependent columns."""
         shape = tuple(np.shape(X))
         if shape != (self.n, self.k):
             raise ShapeError(f"{name} must have shape (n, k) = {(self.n, self.k)}, got {shape}")
@@ -163,6 +171,7 @@ class GeneralizedStiefel(eqx.Module):
             raise OffManifoldError(f"{name} has non-finite entries")
         err = float(self.dist_to_manifold(Xj))
         if not err <= atol:
+            check_full_rank(name, Xj.T @ self.op.mv(Xj))
             raise OffManifoldError(
                 f"{name} is off the manifold: max|XᵀMX − I| = {err:.3e} > {atol:.1e}; "
                 "use manifold.project_to_manifold(X) to move it onto the manifold"

@@ -39,6 +39,8 @@ from .errors import StiefelError
 from .manifold import GeneralizedStiefel
 from .preconditioning import PRECONDITIONING_MODES
 from .result import Status
+from .validation import (check_count, check_nonnegative, check_positive, check_unit_interval, check_wolfe,
+                         is_traced_value)
 
 __all__ = ["RiemannianCG", "RiemannianLBFGS", "RiemannianBB", "STALL_WINDOW_MAX", "to_optx_result"]
 
@@ -49,12 +51,9 @@ def _scalar(x):
     return x if isinstance(x, jax.Array) and x.ndim == 0 else jnp.asarray(x)
 
 
-def _concrete(x) -> float | None:
-    """``float(x)`` when ``x`` is concrete (not traced), else None (validation is skipped under tracing)."""
-    try:
-        return float(x)
-    except (TypeError, jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
-        return None
+def _budget(x):
+    """The runtime iteration limit as an int32 array (checked first: ``True`` or ``2.5`` is no count)."""
+    return None if x is None else jnp.asarray(check_count("budget", x, 0), jnp.int32)
 
 
 def to_optx_result(status):
@@ -79,7 +78,13 @@ class _RiemannianMinimiser(optx.AbstractMinimiser):
       monitor: optional ``X ↦ scalar`` recorded per iterate; history: iterations recorded
         (``stats["history"]``, 0 = none); line: optional fast ``(manifold, X, η, args) ↦ φ``
         with ``φ(τ) = (F(R_X(τη)), d/dτ)`` (e.g. ``objectives.CMMEnergy.line``).
+      budget: optional runtime iteration limit (≤ optimistix's ``max_steps``, which fixes the compiled loop
+        bound): the status becomes ``MAX_ITERS`` when it ends the run; 0 takes no step. A loop of warm-started
+        stages sharing one total passes what is left here and compiles once.
       norm: unused (optimistix's interface); gradient norms use the manifold metric.
+
+    Concrete options are checked on construction (``ParameterError``); traced ones (under ``jit``/``vmap``)
+    cannot be and are not.
     """
 
     manifold: GeneralizedStiefel
@@ -99,6 +104,7 @@ class _RiemannianMinimiser(optx.AbstractMinimiser):
     monitor: Callable | None = None
     history: int = eqx.field(static=True, default=0)
     line: Callable | None = None
+    budget: jax.Array | None = eqx.field(converter=_budget, default=None)
     norm: Any = eqx.field(static=True, default=None)
 
     method: ClassVar[str] = ""
@@ -109,24 +115,17 @@ class _RiemannianMinimiser(optx.AbstractMinimiser):
             raise StiefelError(f"the first argument must be a stiefel.GeneralizedStiefel, got {type(self.manifold).__name__}")
         if self.precondition not in PRECONDITIONING_MODES:
             raise StiefelError(f"unknown precondition mode {self.precondition!r}; choose one of {PRECONDITIONING_MODES}")
-        if not (isinstance(self.ls_max_evals, int) and self.ls_max_evals >= 1):
-            raise StiefelError(f"ls_max_evals must be an integer ≥ 1, got {self.ls_max_evals!r}")
-        if not (isinstance(self.history, int) and self.history >= 0):
-            raise StiefelError(f"history must be an integer ≥ 0, got {self.history!r}")
-        vals = {name: _concrete(getattr(self, name)) for name in
-                ("rtol", "atol", "c1", "c2", "init_step", "max_move", "ftol", "ftol_window", "xtol")}
+        check_count("ls_max_evals", self.ls_max_evals)
+        check_count("history", self.history, 0)
         for name in ("rtol", "atol", "ftol", "xtol"):
-            if vals[name] is not None and not vals[name] >= 0:
-                raise StiefelError(f"{name} must be ≥ 0, got {vals[name]}")
-        for name in ("init_step", "max_move"):
-            if vals[name] is not None and not vals[name] > 0:
-                raise StiefelError(f"{name} must be > 0, got {vals[name]}")
-        c1, c2 = vals["c1"], vals["c2"]
-        if c1 is not None and c2 is not None and not 0 < c1 < c2 < 1:
-            raise StiefelError(f"the line-search constants need 0 < c1 < c2 < 1, got c1 = {c1}, c2 = {c2}")
-        w = vals["ftol_window"]
-        if w is not None and not (w == int(w) and 1 <= w <= STALL_WINDOW_MAX):
-            raise StiefelError(f"ftol_window must be an integer in [1, {STALL_WINDOW_MAX}], got {w}")
+            check_nonnegative(name, getattr(self, name))
+        check_positive("init_step", self.init_step)
+        check_positive("max_move", self.max_move, finite=False)
+        check_wolfe(self.c1, self.c2)
+        w = self.ftol_window  # an array (a runtime value): 20.0 counts as the integer 20, 2.5 does not
+        if not is_traced_value(w):
+            w = w.item()
+            check_count("ftol_window", int(w) if isinstance(w, float) and w.is_integer() else w, 1, STALL_WINDOW_MAX)
 
     # --- optimistix protocol -------------------------------------------------------------------
     def init(self, fn, y, args, options, f_struct, aux_struct, tags) -> State:
@@ -164,8 +163,7 @@ class RiemannianLBFGS(_RiemannianMinimiser):
     method: ClassVar[str] = "lbfgs"
 
     def __check_init__(self):
-        if not (isinstance(self.memory, int) and self.memory >= 1):
-            raise StiefelError(f"memory must be an integer ≥ 1 for L-BFGS, got {self.memory!r}")
+        check_count("memory (L-BFGS pairs)", self.memory)
 
 
 class RiemannianBB(_RiemannianMinimiser):
@@ -175,9 +173,7 @@ class RiemannianBB(_RiemannianMinimiser):
     method: ClassVar[str] = "bb"
 
     def __check_init__(self):
-        g = _concrete(self.bb_gamma)
-        if g is not None and not 0 <= g <= 1:
-            raise StiefelError(f"bb_gamma must lie in [0, 1], got {g}")
+        check_unit_interval("bb_gamma", self.bb_gamma, closed=True)
 
 
 METHOD_CLASSES = {"cg": RiemannianCG, "lbfgs": RiemannianLBFGS, "bb": RiemannianBB}

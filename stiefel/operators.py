@@ -36,6 +36,7 @@ from jaxtyping import Array, Float, Int
 
 from .errors import NotSPDError, ShapeError
 from .sparse_factor import SymmetricFactor
+from .validation import check_finite
 
 __all__ = [
     "LinearOperator",
@@ -259,8 +260,6 @@ class _Frozen(_ByContent):
 
 
 def _check_symmetric(asym: float, scale: float, what: str) -> None:
-    if not np.isfinite(scale):
-        raise NotSPDError(f"{what} has non-finite entries")
     if asym > 1e-10 * max(scale, np.finfo(float).tiny):
         raise NotSPDError(f"{what} is not symmetric: max|M − Mᵀ| = {asym:.3e} (max|M| = {scale:.3e})")
 
@@ -273,7 +272,8 @@ def as_operator(M, *, check: bool = True, factor: bool = True, dtype=None) -> Li
         ``scipy.sparse`` matrix, or a ``LinearOperator`` (returned unchanged). A traced JAX array
         (inside ``jax.grad``/``jit``) gives a diagonal or dense operator without host checks, so
         solutions can be differentiated with respect to M.
-      check: validate symmetry and positive definiteness (raises ``NotSPDError``).
+      check: validate symmetry and positive definiteness (raises ``NotSPDError``). NaN or infinite
+        entries are refused whatever ``check`` (``NonFiniteError``; O(nnz)).
       factor: for sparse M, factor it once so that ``solve`` works.
       dtype: floating dtype of the stored values (default: float64 if x64 is on).
     """
@@ -290,9 +290,8 @@ def as_operator(M, *, check: bool = True, factor: bool = True, dtype=None) -> Li
         if M.ndim != 2 or M.shape[0] != M.shape[1]:
             raise ShapeError(f"M must be square, got shape {M.shape}")
         csr = sp.csr_array(M, dtype=np.float64)
+        check_finite("M", csr)
         if check:
-            if not np.all(np.isfinite(csr.data)):
-                raise NotSPDError("M has non-finite entries")
             scale = float(abs(csr).max()) if csr.nnz else 0.0
             asym = float(abs(csr - csr.T).max()) if csr.nnz else 0.0
             _check_symmetric(asym, scale, "M")
@@ -302,10 +301,9 @@ def as_operator(M, *, check: bool = True, factor: bool = True, dtype=None) -> Li
                 SymmetricFactor(csr)
         return SparseOperator.from_scipy(csr, factor=factor, dtype=dtype)
     arr = np.asarray(M, dtype=np.float64)
+    check_finite("M", arr)
     if arr.ndim == 1:
         if check:
-            if not np.all(np.isfinite(arr)):
-                raise NotSPDError("the diagonal of M has non-finite entries")
             if np.any(arr <= 0):
                 i = int(np.argmin(arr))
                 raise NotSPDError(f"diagonal M must be positive: M[{i}] = {arr[i]:.3e}")

@@ -14,7 +14,6 @@ L-BFGS slows as ρ grows; a short increasing sequence of ρ, each stage warm-sta
 
 from __future__ import annotations
 
-import math
 from typing import Any, Callable, Sequence
 
 import equinox as eqx
@@ -24,8 +23,9 @@ import numpy as np
 from jaxtyping import Array, Float, Int
 
 from ._compile import run_compiled
-from .errors import ShapeError, StiefelError
+from .errors import ParameterError, ShapeError, StiefelError
 from .manifold import GeneralizedStiefel
+from .validation import check_count, check_positive
 
 __all__ = ["PenaltyResult", "penalty_minimize"]
 
@@ -101,7 +101,8 @@ def penalty_minimize(fn: Callable, manifold: GeneralizedStiefel, X0, *, args: An
         problem (n = 60, k = 3, tol 1e-9): ρ = 10 → 100 → 1000 took 636 + 1045 + 2325 iterations, a cold
         ρ = 1000 solve 4759, a modest gain; for the projected point alone one small ρ converges fastest
         (636 iterations at ρ = 10), see ``bench/RESULTS_penalty.md``.
-      maxiter: L-BFGS iteration limit per stage (integer ≥ 1).
+      maxiter: L-BFGS iteration limit per ρ stage (an integer in ``[1, 2³¹ − 1]``; jaxopt's loop bound is
+        static, so each stage gets the same cap and the total is at most ``stages × maxiter``).
       tol: per-stage stop when ‖∇P_ρ(X)‖_F ≤ tol (> 0).
       project: map the minimiser to ``S_M`` by ``X (XᵀMX)^{-1/2}``.
 
@@ -115,15 +116,13 @@ def penalty_minimize(fn: Callable, manifold: GeneralizedStiefel, X0, *, args: An
     if not isinstance(manifold, GeneralizedStiefel):
         raise StiefelError("manifold must be a stiefel.GeneralizedStiefel")
     rhos = [rho] if np.ndim(rho) == 0 else list(rho)
-    if not rhos or not all(isinstance(r, (int, float, np.integer, np.floating)) and not isinstance(r, bool)
-                           and math.isfinite(r) and r > 0 for r in rhos):
-        raise StiefelError(f"rho must be a finite number > 0 or a non-empty sequence of them, got {rho!r}")
+    if not rhos:
+        raise ParameterError("rho must be a finite number > 0 or a non-empty sequence of them, got an empty sequence")
+    rhos = [check_positive("rho" if len(rhos) == 1 else f"rho[{i}]", r) for i, r in enumerate(rhos)]
     if any(b < a for a, b in zip(rhos, rhos[1:])):
-        raise StiefelError(f"a rho sequence must be non-decreasing (continuation), got {rhos}")
-    if isinstance(maxiter, bool) or not isinstance(maxiter, (int, np.integer)) or maxiter < 1:
-        raise StiefelError(f"maxiter must be an integer ≥ 1, got {maxiter!r}")
-    if isinstance(tol, bool) or not isinstance(tol, (int, float, np.floating)) or not (math.isfinite(tol) and tol > 0):
-        raise StiefelError(f"tol must be a finite number > 0, got {tol!r}")
+        raise ParameterError(f"a rho sequence must be non-decreasing (continuation), got {rhos}")
+    maxiter = check_count("maxiter", maxiter)
+    tol = check_positive("tol", tol)
     shape = tuple(np.shape(X0))
     if shape != (manifold.n, manifold.k):
         raise ShapeError(f"X0 must have shape (n, k) = {(manifold.n, manifold.k)}, got {shape}")

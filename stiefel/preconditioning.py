@@ -30,6 +30,7 @@ from jaxtyping import Array, Float
 
 from .manifold import sym
 from .operators import LinearOperator, as_operator
+from .validation import check_positive
 
 __all__ = [
     "as_preconditioner",
@@ -64,9 +65,11 @@ def shifted_inverse(W, M, sigma: float) -> LinearOperator:
 
     ``W`` and ``M`` are ``scipy.sparse`` matrices (or dense arrays); ``σ > 0`` makes ``K``
     SPD when ``W`` is positive semi-definite. A good σ is of the order of the
-    smallest eigenvalues sought.
+    smallest eigenvalues sought. ``σ`` must be a finite number > 0 (``ParameterError``).
     """
     import scipy.sparse as sp
+
+    check_positive("sigma", sigma)
 
     if sp.issparse(W) or sp.issparse(M):
         M_mat = sp.diags(M) if getattr(M, "ndim", 2) == 1 and not sp.issparse(M) else M

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from types import SimpleNamespace
 from typing import Callable, NamedTuple
 
 import equinox as eqx
@@ -34,11 +35,13 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ._compile import is_traced, run_compiled
-from .errors import ShapeError, StiefelError
+from .errors import RankDeficientError, ShapeError, StiefelError
 from .linesearch import along_curve, strong_wolfe
 from .operators import LinearOperator, as_operator
 from .preconditioning import PRECONDITIONING_MODES, as_preconditioner, constrained_preconditioned_gradient
 from .result import History, SequentialResult, Status
+from .validation import (check_count, check_finite, check_full_rank, check_nonnegative, check_number, check_wolfe,
+                         is_integer)
 
 __all__ = ["SequentialConstraint", "SequentialOptions", "minimize_sequential", "DIRECTIONS"]
 
@@ -106,6 +109,19 @@ class SequentialOptions:
     max_step: float = float(np.pi / 2)
     precondition: str = "residual"
 
+    def __post_init__(self):
+        _check_options(self)
+
+
+def _check_options(o) -> None:
+    """The numeric options of ``minimize_sequential`` in range (``ParameterError``)."""
+    check_count("max_iters", o.max_iters)
+    check_count("ls_max_evals", o.ls_max_evals)
+    check_nonnegative("gtol", o.gtol)
+    check_nonnegative("xtol", o.xtol)
+    check_wolfe(o.c1, o.c2)
+    check_number("max_step", o.max_step, low=0, high=float(np.pi), low_open=True)
+
 
 class _Carry(NamedTuple):
     x: jax.Array
@@ -124,8 +140,9 @@ class _Carry(NamedTuple):
     n_restarts: jax.Array
 
 
-def _column_core(f, op: LinearOperator, P, Phi, active, x0, opts: SequentialOptions):
-    """Minimise ``f`` on ``{ΦᵀMx = 0, xᵀMx = 1}`` from ``x0`` (already on the set)."""
+def _column_core(f, op: LinearOperator, P, Phi, active, x0, budget, opts: SequentialOptions):
+    """Minimise ``f`` on ``{ΦᵀMx = 0, xᵀMx = 1}`` from ``x0`` (already on the set) in at most ``budget``
+    (a runtime int32, ≤ ``opts.max_iters``) iterations."""
     S = SequentialConstraint.__new__(SequentialConstraint)
     object.__setattr__(S, "op", op)
     object.__setattr__(S, "Phi", Phi)
@@ -155,7 +172,8 @@ def _column_core(f, op: LinearOperator, P, Phi, active, x0, opts: SequentialOpti
     f0, g0 = value_and_grad(x0)
     xi0, gn0, r0 = gradients(x0, g0)
     finite0 = jnp.isfinite(f0) & jnp.all(jnp.isfinite(g0))
-    status0 = jnp.where(~finite0, Status.NON_FINITE, jnp.where(gn0 <= opts.gtol, Status.CONVERGED, -1))
+    status0 = jnp.where(~finite0, Status.NON_FINITE, jnp.where(gn0 <= opts.gtol, Status.CONVERGED,
+                                                                jnp.where(budget <= 0, Status.MAX_ITERS, -1)))
     carry0 = _Carry(
         x=x0, f=f0, r=r0, xi=xi0, gnorm=gn0, d=-xi0, f_prev=f0, step=max_step,
         since_restart=jnp.zeros((), jnp.int32), it=jnp.zeros((), jnp.int32),
@@ -190,11 +208,11 @@ def _column_core(f, op: LinearOperator, P, Phi, active, x0, opts: SequentialOpti
         it = c.it + 1
         conv = (gn_new <= opts.gtol) | ((opts.xtol > 0) & ok & (tau <= opts.xtol))
         status = jnp.where(
-            retry, jnp.where(it >= opts.max_iters, Status.MAX_ITERS, -1),
+            retry, jnp.where(it >= budget, Status.MAX_ITERS, -1),
             jnp.where(~ok, Status.LINE_SEARCH_FAILED,
                       jnp.where(~finite, Status.NON_FINITE,
                                 jnp.where(conv, Status.CONVERGED,
-                                          jnp.where(it >= opts.max_iters, Status.MAX_ITERS, -1)))),
+                                          jnp.where(it >= budget, Status.MAX_ITERS, -1)))),
         ).astype(jnp.int32)
         # next direction (unnormalised), transported by projection onto the new tangent space
         d_moved = S.proj(x_new, d)
@@ -248,6 +266,7 @@ def minimize_sequential(
     dtype=None,
     throw: bool = False,
     callback: Callable | None = None,
+    budget: int | None = None,
 ) -> SequentialResult:
     """Find ``k`` M-orthonormal columns one at a time (thesis Algorithm 6).
 
@@ -269,12 +288,22 @@ def minimize_sequential(
       precondition: ``"residual"`` (P on one column per iteration) or ``"metric"`` (the
         exact gradient in the P⁻¹-metric with the constraints as multipliers).
       gtol: stop a column when ``‖grad‖_M ≤ gtol``; xtol: or when the step τ ≤ xtol (0: off).
-      max_iters: iteration limit per column.
-      c1, c2, ls_max_evals, max_step: line search parameters.
+      max_iters: iteration limit: the total number of iterations of the call, shared fairly by the
+        columns: column j may use ⌈left / (k − j)⌉ of the ``left`` iterations columns 0 … j−1 did not
+        use (what a column leaves rolls over; one that cannot converge does not starve the others; a
+        column that gets none keeps its projected start, 0 iterations, status ``max_iters``). An integer
+        in ``[1, 2³¹ − 1]``; also the compiled loop bound (each column's history has ``max_iters + 1``
+        entries).
+      c1, c2, ls_max_evals, max_step: line search parameters (``0 < c1 < c2 < 1``, ``0 < max_step ≤ π``).
       dtype: computation dtype (default float64 when x64 is enabled).
       throw: raise ``SolverError`` if a column ends with ``line_search_failed`` / ``non_finite``.
       callback: optional host function ``callback(j, column_result_dict)`` called after
         each column (progress reporting, saving partial results).
+      budget: optional total ``0 ≤ budget ≤ max_iters`` used instead of ``max_iters`` without
+        recompiling (warm-started stages sharing one total pass what is left).
+
+    Every option is checked before any work (``ParameterError``; ``RankDeficientError`` for an ``X0``
+    with dependent columns).
 
     Returns:
       ``SequentialResult`` (per-column status, iterations, history and timings).
@@ -293,9 +322,14 @@ def minimize_sequential(
         raise StiefelError(f"unknown precondition mode {precondition!r}; choose one of {PRECONDITIONING_MODES}")
     if retraction != "periodic":
         raise StiefelError("minimize_sequential steps along the periodic retraction only (retraction='periodic')")
+    _check_options(SimpleNamespace(max_iters=max_iters, ls_max_evals=ls_max_evals, gtol=gtol, xtol=xtol, c1=c1,
+                                   c2=c2, max_step=max_step))
+    max_iters = int(max_iters)
+    budget = max_iters if budget is None else check_count("budget", budget, 0, max_iters,
+                                                          high_label=f"max_iters = {max_iters}")
     op = as_operator(M, dtype=dtype)
     n = op.n
-    if not isinstance(k, (int, np.integer)) or not 1 <= int(k) <= n:
+    if not is_integer(k) or not 1 <= int(k) <= n:
         raise ShapeError(f"k must be an integer with 1 ≤ k ≤ n = {n}, got k = {k!r}")
     k = int(k)
     dt = op.diagonal().dtype
@@ -303,12 +337,12 @@ def minimize_sequential(
         X0 = jnp.asarray(X0, dtype=dt)
         if X0.shape != (n, k):
             raise ShapeError(f"X0 must have shape (n, k) = {(n, k)}, got {X0.shape}")
-        if not bool(jnp.all(jnp.isfinite(X0))):
-            raise StiefelError("X0 has non-finite entries")
+        check_finite("X0", X0)
+        check_full_rank("X0", X0.T @ op.mv(X0))
     if key is None:
         key = jax.random.PRNGKey(seed)
     P = as_preconditioner(preconditioner)
-    opts = SequentialOptions(direction=direction, gtol=float(gtol), xtol=float(xtol), max_iters=int(max_iters),
+    opts = SequentialOptions(direction=direction, gtol=float(gtol), xtol=float(xtol), max_iters=max_iters,
                              c1=float(c1), c2=float(c2), ls_max_evals=int(ls_max_evals), max_step=float(max_step),
                              precondition=precondition)
 
@@ -318,19 +352,23 @@ def minimize_sequential(
     out = {name: [] for name in ("values", "grad_norm", "iterations", "status", "n_fevals", "n_restarts")}
     hist = []
     times, compile_total, t_start = [], 0.0, time.perf_counter()
+    left = budget  # iterations the remaining columns share (fairly, see max_iters)
     for j in range(k):
         S = SequentialConstraint(op, Phi)
         y = X0[:, j] if X0 is not None else jax.random.normal(keys[j], (n,), dtype=dt)
         if X0 is not None:
             z = S._complement(y)
             if not float(jnp.dot(z, op.mv(z))) > 1e-16 * float(jnp.dot(y, op.mv(y))):
-                raise StiefelError(
+                raise RankDeficientError(
                     f"X0[:, {j}] lies in the span of the previous columns (found so far); "
                     "cannot start there: give linearly independent start columns"
                 )
         x0 = S.project(y)
-        res, t_compile, t_run = run_compiled(_column_core, f, op, P, Phi, active, x0, opts)
+        share = -(-left // (k - j))  # ⌈left / columns to go⌉: a fair part of what is left
+        res, t_compile, t_run = run_compiled(_column_core, f, op, P, Phi, active, x0, jnp.asarray(share, jnp.int32),
+                                             opts)
         x, fx, gn, it, st, h, nf, nr = res
+        left -= int(it)
         compile_total += t_compile
         times.append(t_run)
         Phi = Phi.at[:, j].set(x)

@@ -144,7 +144,7 @@ def test_glmh_bad_input(knight):
         bases.glmh(lap.W, lap.A, 3, mu_V=1.0)
     with pytest.raises(ValueError, match="Phi"):
         bases.glmh(lap.W, lap.A, 3, mu_perp=1.0, Phi=Phi[:-1])
-    with pytest.raises(ValueError, match="k must satisfy"):
+    with pytest.raises(ValueError, match="k must be an integer"):
         bases.glmh(lap.W, lap.A, m.n_vertices)
     with pytest.raises(ValueError, match="match W"):
         bases.glmh(lap.W, sp.eye(5), 3)

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from stiefel import DenseOperator, DiagonalOperator, NotSPDError, ShapeError, SparseOperator, as_operator
+from stiefel import (DenseOperator, DiagonalOperator, NonFiniteError, NotSPDError, ShapeError, SparseOperator,
+                     as_operator)
 
 from stiefel_cases import M_KINDS, dense_of, metric_matrix
 
@@ -58,7 +59,6 @@ def test_sparse_matvec_on_irregular_rows():
     "M, message",
     [
         (np.array([1.0, -2.0, 3.0]), "positive"),
-        (np.array([1.0, np.nan, 3.0]), "non-finite"),
         (np.array([[2.0, 1.0], [0.0, 2.0]]), "not symmetric"),
         (np.array([[1.0, 2.0], [2.0, 1.0]]), "not positive definite"),
         (sp.csr_matrix(np.array([[1.0, 2.0, 0], [2.0, 1.0, 0], [0, 0, 1.0]])), "not positive definite"),
@@ -69,6 +69,14 @@ def test_sparse_matvec_on_irregular_rows():
 def test_non_spd_is_rejected_with_a_named_error(M, message):
     with pytest.raises(NotSPDError, match=message):
         as_operator(M)
+
+
+@pytest.mark.parametrize("M", [np.array([1.0, np.nan, 3.0]), np.array([[1.0, np.inf], [np.inf, 1.0]]),
+                               sp.csr_matrix(np.array([[1.0, 0.0], [0.0, np.nan]]))])
+@pytest.mark.parametrize("check", [True, False])
+def test_non_finite_matrix_is_rejected_whatever_check(M, check):
+    with pytest.raises(NonFiniteError, match="M has 1 non-finite|M has 2 non-finite"):
+        as_operator(M, check=check)
 
 
 def test_non_square_is_rejected():

@@ -75,8 +75,8 @@ def test_runtime_values_do_not_recompile(brockett):
 
 @pytest.mark.parametrize("kwargs,match", [
     (dict(c1=0.5, c2=0.1), "0 < c1 < c2 < 1"),
-    (dict(atol=-1.0), "atol must be ≥ 0"),
-    (dict(init_step=0.0), "init_step must be > 0"),
+    (dict(atol=-1.0), "atol must be a finite number ≥ 0"),
+    (dict(init_step=0.0), "init_step must be a finite number > 0"),
     (dict(ftol_window=100), "ftol_window"),
     (dict(ls_max_evals=0), "ls_max_evals"),
 ])

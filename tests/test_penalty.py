@@ -13,7 +13,7 @@ import pytest
 import scipy.linalg as sl
 
 import stiefel
-from stiefel.errors import ShapeError, StiefelError
+from stiefel.errors import ParameterError, ShapeError, StiefelError
 
 N, K = 60, 3
 _rng = np.random.default_rng(7)
@@ -82,10 +82,11 @@ def test_args_are_traced_and_continuation_warm_starts():
 
 
 @pytest.mark.parametrize("kw, error", [
-    (dict(rho=0.0), StiefelError), (dict(rho=-1.0), StiefelError), (dict(rho=float("nan")), StiefelError),
-    (dict(rho=()), StiefelError), (dict(rho=(100.0, 10.0)), StiefelError), (dict(rho=True), StiefelError),
-    (dict(maxiter=0), StiefelError), (dict(maxiter=2.5), StiefelError), (dict(maxiter=True), StiefelError),
-    (dict(tol=0.0), StiefelError), (dict(tol=-1e-3), StiefelError), (dict(tol=float("inf")), StiefelError),
+    (dict(rho=0.0), ParameterError), (dict(rho=-1.0), ParameterError), (dict(rho=float("nan")), ParameterError),
+    (dict(rho=()), ParameterError), (dict(rho=(100.0, 10.0)), ParameterError), (dict(rho=True), ParameterError),
+    (dict(maxiter=0), ParameterError), (dict(maxiter=2.5), ParameterError), (dict(maxiter=True), ParameterError),
+    (dict(maxiter=2**31), ParameterError),
+    (dict(tol=0.0), ParameterError), (dict(tol=-1e-3), ParameterError), (dict(tol=float("inf")), ParameterError),
     (dict(X0=np.zeros((N, K + 1))), ShapeError), (dict(X0=np.zeros(N)), ShapeError),
     (dict(manifold=np.eye(N)), StiefelError),
 ])
