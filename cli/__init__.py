@@ -2,9 +2,11 @@
 
 The CLI sits on top of the layers (``mesh``, ``objectives``, ``stiefel``) and is
 the only place that switches JAX to float64 (``jax_enable_x64``, in ``main``).
-Modules: ``cli.main`` (argument parsing, subcommands), ``cli.demo_mesh`` (the
-built-in demo surface), ``cli.outputs`` (npz / PLY / JSON writers, μ parsing,
-provenance), ``cli.render`` (PNG contact sheet of per-vertex fields).
+Modules: ``cli.main`` (argument parsing, signals, exit codes), ``cli.commands``
+(the three subcommands), ``cli.run_dir`` (atomic output directories: staging,
+fsync, commit with ``summary.json`` last, lock), ``cli.demo_mesh`` (the built-in
+demo surface), ``cli.outputs`` (npz / PLY writers, μ parsing, provenance),
+``cli.render`` (PNG contact sheet of per-vertex fields, z-buffer rasteriser).
 """
 
 __all__: list[str] = []

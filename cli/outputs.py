@@ -1,21 +1,26 @@
-"""Writers and small parsers for the CLI: μ strings, provenance, npz / PLY / JSON.
+"""Writers and small parsers for the CLI: μ strings, bounded integers, provenance, PLY, JSON values.
 
-Nothing here imports JAX at module level; ``versions()`` imports it lazily.
+Nothing here imports numpy or JAX at module level (a Ctrl-C during the CLI's start-up must reach
+``cli.main.main``); they are imported where used.
 """
 
 from __future__ import annotations
 
-import json
+import math
+import os
 import platform
 import re
 import sys
-from importlib import metadata
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO, Callable
 
-import numpy as np
+__all__ = ["PROG", "MuSpec", "PartialColumns", "parse_mu", "bounded_int", "INT_MAX", "versions", "to_jsonable",
+           "write_ply", "stderr_line"]
 
-__all__ = ["MuSpec", "PartialColumns", "parse_mu", "versions", "to_jsonable", "write_json", "write_ply"]
+#: the command's name, first word of every message it prints
+PROG = "stiefel"
+#: the largest integer option the CLI accepts (a C ``int``; larger values overflow deep inside)
+INT_MAX = 2**31 - 1
 
 _MU_RE = re.compile(r"^\s*([0-9]*\.?[0-9]+(?:[eE][+-]?[0-9]+)?)\s*(n?)\s*$")
 
@@ -47,12 +52,30 @@ def parse_mu(text: str) -> MuSpec:
         raise ValueError(f"invalid mu {text!r}: give a non-negative number (e.g. 5.2) "
                          "or a multiple of the vertex count (e.g. 0.01n)")
     value = float(m.group(1))
-    if not np.isfinite(value):
+    if not math.isfinite(value):
         raise ValueError(f"invalid mu {text!r}: must be finite")
     return MuSpec(text, value, bool(m.group(2)))
 
 
+def bounded_int(low: int, high: int = INT_MAX) -> Callable[[str], int]:
+    """An argparse ``type=``: an integer in ``[low, high]``, else ``ValueError`` naming the range."""
+
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise ValueError(f"expected an integer in [{low}, {high}], got {text!r}") from None
+        if not low <= v <= high:
+            raise ValueError(f"expected an integer in [{low}, {high}], got {v}")
+        return v
+
+    parse.__name__ = "integer"
+    return parse
+
+
 def _version(dist: str) -> str | None:
+    from importlib import metadata
+
     try:
         return metadata.version(dist)
     except metadata.PackageNotFoundError:
@@ -62,6 +85,7 @@ def _version(dist: str) -> str | None:
 def versions() -> dict[str, str | None]:
     """Versions of python, jax, jaxlib, numpy, scipy, trimesh and this package (``stiefel-cmm``)."""
     import jax
+    import numpy as np
     import scipy
     import trimesh
 
@@ -79,6 +103,8 @@ def versions() -> dict[str, str | None]:
 
 def to_jsonable(obj: Any) -> Any:
     """Recursively turn numpy scalars/arrays, tuples and paths into JSON-serialisable values."""
+    import numpy as np
+
     if isinstance(obj, dict):
         return {str(k): to_jsonable(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
@@ -89,23 +115,22 @@ def to_jsonable(obj: Any) -> Any:
         return obj.item()
     if isinstance(obj, Path):
         return str(obj)
-    if isinstance(obj, float) and not np.isfinite(obj):
+    if isinstance(obj, float) and not math.isfinite(obj):
         return None
     return obj
 
 
-def write_json(path: Path, obj: dict) -> None:
-    """Write ``obj`` as indented UTF-8 JSON."""
-    path.write_text(json.dumps(to_jsonable(obj), indent=2, ensure_ascii=False) + "\n", encoding="utf-8")
-
-
-def write_ply(path: Path, vertices: np.ndarray, faces: np.ndarray, fields: np.ndarray,
-              names: list[str] | None = None) -> None:
-    """ASCII PLY with one float64 vertex property per column of ``fields``.
+def write_ply(target: Path | BinaryIO, vertices: Any, faces: Any, fields: Any, names: list[str] | None = None) -> None:
+    """ASCII PLY with one float64 vertex property per column of ``fields``, to a path or a binary file.
 
     vertices: ``(n, 3)``; faces: ``(m, 3)``; fields: ``(n, k)``, written as
     properties ``mode_0 … mode_{k-1}`` (or ``names``) after x, y, z.
     """
+    import numpy as np
+
+    if isinstance(target, (str, Path)):
+        with open(target, "wb") as fh:
+            return write_ply(fh, vertices, faces, fields, names)
     fields = np.asarray(fields, dtype=np.float64).reshape(vertices.shape[0], -1)
     names = names or [f"mode_{j}" for j in range(fields.shape[1])]
     header = ["ply", "format ascii 1.0", "comment stiefel-cmm compressed manifold modes",
@@ -113,10 +138,9 @@ def write_ply(path: Path, vertices: np.ndarray, faces: np.ndarray, fields: np.nd
     header += [f"property double {name}" for name in names]
     header += [f"element face {faces.shape[0]}", "property list uchar int vertex_indices", "end_header"]
     vdata = np.hstack([np.asarray(vertices, dtype=np.float64), fields])
-    with open(path, "w", encoding="ascii") as fh:
-        fh.write("\n".join(header) + "\n")
-        np.savetxt(fh, vdata, fmt="%.17g")
-        np.savetxt(fh, np.hstack([np.full((faces.shape[0], 1), 3), faces]), fmt="%d")
+    target.write(("\n".join(header) + "\n").encode("ascii"))
+    np.savetxt(target, vdata, fmt="%.17g")
+    np.savetxt(target, np.hstack([np.full((faces.shape[0], 1), 3), faces]), fmt="%d")
 
 
 def stderr_line(msg: str) -> None:
@@ -130,28 +154,42 @@ class PartialColumns:
     Made for ``stiefel.minimize_sequential``'s ``callback(j, {"x": (n,), "value", "status", …})``:
     after column ``j`` the file holds ``modes (n, j+1)`` (solve order, not yet
     sorted by compressed eigenvalue), ``values`` and ``status``. Written to a
-    temporary name and renamed, so a reader never sees half a file. ``say``, if
-    given, gets one progress line per column.
+    temporary name, fsynced and renamed, so a reader never sees half a file. ``say``,
+    if given, gets one progress line per column.
     """
 
-    def __init__(self, path: Path, say=None) -> None:
+    #: appended to the file name while it is written
+    TMP_SUFFIX = ".tmp.npz"
+
+    def __init__(self, path: Path, say: Callable[[str], None] | None = None) -> None:
         self.path, self.say = Path(path), say
-        self.columns: list[np.ndarray] = []
+        self.columns: list[Any] = []
         self.values: list[float] = []
         self.status: list[str] = []
 
+    @property
+    def tmp(self) -> Path:
+        """The temporary name the file is written to before the rename."""
+        return self.path.with_name(self.path.name + self.TMP_SUFFIX)
+
     def __call__(self, j: int, info: dict) -> None:
-        import os
+        import numpy as np
 
         if j < len(self.columns):  # a new continuation stage restarts the columns
             del self.columns[j:], self.values[j:], self.status[j:]
         self.columns.append(np.asarray(info["x"], dtype=np.float64))
         self.values.append(float(info.get("value", np.nan)))
         self.status.append(str(info.get("status", "")))
-        tmp = self.path.with_name(self.path.name + ".tmp.npz")
-        np.savez(tmp, modes=np.stack(self.columns, axis=1), values=np.array(self.values),
-                 status=np.array(self.status))
-        os.replace(tmp, self.path)
+        try:
+            with open(self.tmp, "wb") as fh:
+                np.savez(fh, modes=np.stack(self.columns, axis=1), values=np.array(self.values),
+                         status=np.array(self.status))
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.replace(self.tmp, self.path)
+        except BaseException:
+            self.tmp.unlink(missing_ok=True)
+            raise
         if self.say is not None:
             self.say(f"column {j} done ({self.status[-1]}), saved {self.path}")
 

@@ -2,11 +2,14 @@
 
 Most runs call ``cli.main.main([...])`` in-process (JAX compiles once per
 process); one run goes through ``python -m cli.main`` in a subprocess, and one
-checks that a bad argument there gives one stderr line and no traceback.
+checks that a bad argument there gives one stderr line and no traceback. How the
+outputs are written (staging, lock, interrupts, full disk) is tested in
+``test_cli_outputs.py``.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import subprocess
 import sys
@@ -93,6 +96,15 @@ def test_modes_demo_mesh(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     for lib in ("python", "jax", "numpy", "scipy", "stiefel-cmm"):
         assert summary["versions"][lib]
     assert summary["timings"]["solve_wall"] > 0
+    assert summary["solver_options"] == {"max_iters": 800, "smoothing": "f6", "gtol": 1e-5}
+    # files by role, each with its size and SHA-256; exactly the files written (cli.run_dir)
+    assert {role: rec["name"] for role, rec in summary["files"].items()} == {
+        "npz": "modes.npz", "ply": "modes.ply", "png": "modes.png"}
+    for rec in summary["files"].values():
+        data = (out / rec["name"]).read_bytes()
+        assert rec["bytes"] == len(data) and rec["sha256"] == hashlib.sha256(data).hexdigest()
+    assert sorted(p.name for p in out.iterdir()) == [".stiefel.lock", "modes.npz", "modes.ply", "modes.png",
+                                                     "summary.json"]
     _check_ply(out / "modes.ply", V.shape[0], 3)
     _check_png(out / "modes.png")
 
@@ -171,6 +183,36 @@ def test_non_manifold_mesh(tmp_path: Path, capsys: pytest.CaptureFixture) -> Non
     assert "manifold" in _one_error_line(capsys.readouterr().err).lower()
 
 
+def test_non_manifold_mesh_robust_laplacian(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    # a sphere with one fin triangle on an existing edge: refused by default, solved with --laplacian robust
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    a, b = sphere.faces[0][:2]
+    V = np.vstack([sphere.vertices, [[0.0, 0.0, 3.0]]])
+    F = np.vstack([sphere.faces, [[a, b, len(V) - 1]]])
+    path = tmp_path / "fin_sphere.obj"
+    path.write_text("".join(f"v {x!r} {y!r} {z!r}\n" for x, y, z in V.tolist())
+                    + "".join(f"f {i} {j} {k}\n" for i, j, k in (F + 1).tolist()))
+    assert main(["eigs", str(path), "-k", "4", "--out", str(tmp_path / "refused")]) == 1
+    assert "--laplacian robust" in _one_error_line(capsys.readouterr().err)
+    assert not (tmp_path / "refused" / "summary.json").exists()
+
+    out = tmp_path / "robust"
+    assert main(["eigs", str(path), "-k", "4", "--out", str(out), "--laplacian", "robust", "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "non-manifold edge" in err  # the finding is reported, not silent
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["mesh"]["n_nonmanifold_edges"] == 1
+    assert summary["mesh"]["cleaning_report"]["n_nonmanifold_edges"] == 1
+    assert any("non-manifold edge" in line for line in summary["mesh"]["changes"])
+    assert "robust" in summary["parameters"]["laplacian"]
+    m = mesh.load(path, allow_nonmanifold=True, warn=False)
+    ref = mesh.eigenbasis(mesh.laplacian(m, weights="robust"), 4)
+    got = np.load(out / "eigs.npz")["eigenvalues"]
+    np.testing.assert_allclose(got, np.asarray(ref.evals), rtol=1e-8, atol=1e-10)
+
+
 def test_bad_k(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     assert main(["modes", "-k", "0", "--out", str(tmp_path)]) == 2
     _one_error_line(capsys.readouterr().err)
@@ -193,7 +235,7 @@ def test_subprocess_module(tmp_path: Path) -> None:
 
 
 def test_partial_columns(tmp_path: Path) -> None:
-    from cli.main import _partial_writer
+    from cli.commands import _partial_writer
     from cli.outputs import PartialColumns
 
     lines: list[str] = []

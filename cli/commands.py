@@ -1,0 +1,361 @@
+"""The ``stiefel`` subcommands ``modes``, ``eigs`` and ``compare-smoothings`` (parsed by ``cli.main``).
+
+Each ``cmd_*(args, argv, run)`` loads the mesh, solves, stages its files in ``run``
+(``cli.run_dir.RunDir``, already validated and locked) and commits them with ``summary.json``
+last. Nothing heavy is imported at module level (``mesh``, ``objectives``, numpy are imported
+by the commands), so a Ctrl-C during start-up reaches ``cli.main.main``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+import warnings
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+from .outputs import PROG, MuSpec, PartialColumns, stderr_line, to_jsonable, versions, write_ply
+from .run_dir import RunDir
+
+__all__ = ["CLIError", "cmd_modes", "cmd_eigs", "cmd_compare", "outputs_of", "smoothing_names", "GTOL", "METHODS",
+           "SMOOTHINGS"]
+
+GTOL = 1e-6
+METHODS = ("block", "sequential", "admm", "admm_sequential", "fast")  # objectives.cmm_solvers.SOLVERS
+SMOOTHINGS = tuple(f"f{i}" for i in range(10))
+PARTIAL = "modes.partial.npz"
+
+
+class CLIError(Exception):
+    """Bad input detected by the CLI; reported as one line, exit code 1."""
+
+
+# ---------------------------------------------------------------------------- helpers
+
+
+class _Progress:
+    """One line per stage on stdout (stderr with --json); silent with --quiet."""
+
+    def __init__(self, quiet: bool, as_json: bool) -> None:
+        self.quiet, self.as_json, self.t0 = quiet, as_json, time.perf_counter()
+
+    def __call__(self, msg: str) -> None:
+        if self.quiet:
+            return
+        stream = sys.stderr if self.as_json else sys.stdout
+        print(f"[{time.perf_counter() - self.t0:7.2f}s] {msg}", file=stream, flush=True)
+
+
+LAPLACIANS = ("cotangent", "robust")
+_LAPLACIAN_TEXT = {"cotangent": "cotangent, lumped area, normalised to total area 1",
+                   "robust": "intrinsic-Delaunay cotangent (robust_laplacian, tufted cover), lumped area, "
+                             "normalised to total area 1"}
+
+
+def _load(source: str | None, laplacian: str = "cotangent") -> tuple[Any, Any, dict]:
+    """``(mesh.Mesh, mesh.Laplacian, description)`` for a path or the demo mesh.
+
+    Every change ``mesh.load`` made (``report.lines()``) and every warning is printed to stderr
+    and recorded in the description (``summary.json``'s ``mesh``); ``laplacian="robust"`` admits
+    non-manifold meshes.
+    """
+    import mesh
+
+    robust = laplacian == "robust"
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        if source is None:
+            from .demo_mesh import DEMO_NAME, demo_mesh
+
+            m = mesh.load(demo_mesh(), warn=False, allow_nonmanifold=robust)
+            name = DEMO_NAME
+        else:
+            path = Path(source)
+            if not path.is_file():
+                raise CLIError(f"mesh file not found: {source}")
+            m = mesh.load(path, warn=False, allow_nonmanifold=robust)  # NonManifoldError names --laplacian robust
+            name = str(path.resolve())
+        report = m.report.lines()
+        for line in report:
+            stderr_line(f"{PROG}: mesh changed or found: {line}")
+        lap = mesh.laplacian(m, weights="robust" if robust else "cotangent")
+    messages = [" ".join(str(w.message).split()) for w in caught]
+    for msg in dict.fromkeys(messages):  # each distinct warning once
+        stderr_line(f"{PROG}: warning: {msg}")
+    info = {"source": name, "n_vertices": m.n_vertices, "n_faces": m.n_faces, "n_components": m.n_components,
+            "n_boundary_loops": m.n_boundary_loops, "euler_characteristic": m.euler_characteristic,
+            "n_nonmanifold_edges": m.n_nonmanifold_edges, "laplacian": _LAPLACIAN_TEXT[laplacian],
+            "changes": report, "cleaning_report": m.report.as_dict(), "warnings": list(dict.fromkeys(messages))}
+    return m, lap, info
+
+
+def _check_k(k: int, n: int) -> None:
+    if k >= n:
+        raise CLIError(f"k = {k} must be smaller than the number of vertices n = {n}")
+
+
+def _summary_head(args: argparse.Namespace, argv: Sequence[str] | None, mesh_info: dict) -> dict:
+    return {"command": args.command, "argv": list(argv) if argv is not None else sys.argv[1:],
+            "mesh": mesh_info, "seed": args.seed, "versions": versions(),
+            "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+
+
+def _mu_record(spec: MuSpec, mu: float) -> dict:
+    return {"given": spec.text, "relative": spec.relative, "value": mu}
+
+
+def _encode(summary: dict) -> str:
+    return json.dumps(to_jsonable(summary), indent=2, ensure_ascii=False) + "\n"
+
+
+def _picture(run: RunDir, name: str, fill: Callable[[Path], object]) -> str | None:
+    """Stage the PNG ``name``; a failure of the picture itself (not of the disk) is reported on
+    stderr and returned (for ``summary.json``), and the run goes on without it."""
+    try:
+        run.write_path("png", name, fill)
+    except Exception as e:  # noqa: BLE001 — OutputError (disk) is not caught: it ends the run
+        from .run_dir import OutputError
+
+        if isinstance(e, (OSError, OutputError)):
+            raise
+        msg = f"{name} not written: {type(e).__name__}: {' '.join(str(e).split())[:200]}"
+        stderr_line(f"{PROG}: warning: {msg}")
+        return msg
+    return None
+
+
+def _finish(args: argparse.Namespace, run: RunDir, summary: dict) -> None:
+    """Commit the run (``summary.json`` last); ``--json`` prints the summary as written."""
+    written = run.commit(summary, _encode)
+    if args.json:
+        print(json.dumps(to_jsonable(written), ensure_ascii=False))
+
+
+# ---------------------------------------------------------------------------- commands
+
+
+def cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir) -> int:
+    import mesh
+    import numpy as np
+    from objectives.cmm import compressed_modes
+
+    say, t_all, out = _Progress(args.quiet, args.json), time.perf_counter(), run.path
+    timings: dict[str, float] = {}
+    t = time.perf_counter()
+    m, lap, mesh_info = _load(args.mesh, args.laplacian)
+    _check_k(args.k, m.n_vertices)
+    timings["load_and_laplacian"] = time.perf_counter() - t
+    mu = args.mu.resolve(m.n_vertices)
+    say(f"mesh {mesh_info['source']}: n = {m.n_vertices} vertices, {m.n_faces} faces")
+    extra: dict[str, Any] = {}
+    U = None
+    if args.method == "fast":
+        d = args.samples or max(10 * args.k, m.n_vertices // 10)
+        d = min(d, m.n_vertices)
+        t = time.perf_counter()
+        U = mesh.local_functions(m, n_samples=d).U
+        timings["local_functions"] = time.perf_counter() - t
+        say(f"local functions: d = {d}")
+    solver, passed = _solver(args, args.method, args.smoothing, local_functions=U)
+    say(f"solving: k = {args.k}, mu = {mu:.6g} ({args.mu.text}), method = {args.method}, "
+        f"smoothing = {args.smoothing}, weighting = {args.weighting}")
+    partial = _partial_writer(args.method, compressed_modes, out, say)
+    if partial is not None:
+        extra["callback"] = partial
+    t = time.perf_counter()
+    res = compressed_modes(lap, args.k, mu, solver=solver, weighting=args.weighting, seed=args.seed, **extra)
+    timings["solve_total"] = time.perf_counter() - t
+    timings["solve_wall"] = float(res.wall_time)
+    timings["compile"] = float(res.compile_time)
+    say(f"solved: status = {res.status}, iterations = {res.iterations}, objective = {res.objective:.6g}, "
+        f"orthogonality = {res.orthogonality:.2e}")
+
+    t = time.perf_counter()
+    diag = {"objective": res.objective, "dirichlet": res.dirichlet, "l1": res.l1, "sparsity": res.sparsity,
+            "orthogonality": res.orthogonality, "iterations": res.iterations, "status": res.status}
+    params = dict(res.params)
+    params["mu"] = _mu_record(args.mu, mu)
+    params["laplacian"] = args.laplacian
+    run.write("npz", "modes.npz", lambda fh: np.savez_compressed(
+        fh, modes=res.modes, compressed_eigenvalues=res.compressed_eigenvalues, vertices=m.vertices,
+        faces=m.faces, mu=mu, diagnostics=json.dumps(to_jsonable(diag)), parameters=json.dumps(to_jsonable(params))))
+    run.write("ply", "modes.ply", lambda fh: write_ply(fh, m.vertices, m.faces, res.modes))
+    picture_error = None
+    if not args.no_png:
+        from .render import contact_sheet
+
+        titles = [f"mode {j}  λ̃ = {lam:.4g}" for j, lam in enumerate(res.compressed_eigenvalues)]
+        picture_error = _picture(run, "modes.png", lambda path: contact_sheet(
+            path, m.vertices, m.faces, res.modes, titles=titles))
+    timings["write"] = time.perf_counter() - t
+    timings["total"] = time.perf_counter() - t_all
+    summary = _summary_head(args, argv, mesh_info)
+    summary.update(parameters=params, solver_options=passed, mu=mu, diagnostics=diag,
+                   compressed_eigenvalues=res.compressed_eigenvalues, timings=timings,
+                   partial_results=_PARTIAL_NOTE if partial is None else "modes.partial.npz during the solve")
+    if picture_error:
+        summary["picture_error"] = picture_error
+    _finish(args, run, summary)
+    say(f"wrote {out / 'modes.npz'} and {out / 'modes.ply'}")
+    if "png" in run.files:
+        say(f"wrote {out / 'modes.png'}")
+    say(f"wrote {out / 'summary.json'}")
+    return 0
+
+
+_PARTIAL_NOTE = ("modes are written when the solve finishes (only --method sequential reports its columns "
+                 "as they complete)")
+
+
+def _solver(args: argparse.Namespace, method: str, smoothing: str, *, local_functions: Any = None
+            ) -> tuple[Any, dict]:
+    """``(solver, options passed)``: the ``objectives.cmm_solvers`` object for ``--method``. Every solver
+    gets ``--max-iters``; the manifold solvers also ``--smoothing`` and ``--gtol``; fast its ``U``."""
+    from objectives.cmm_solvers import SOLVERS, FastCMM
+
+    passed: dict[str, Any] = {"max_iters": args.max_iters}
+    if method in ("block", "sequential"):
+        passed.update(smoothing=smoothing, gtol=GTOL if args.gtol is None else args.gtol)
+        return SOLVERS[method](**passed), passed
+    if args.gtol is not None:
+        stderr_line(f"{PROG}: warning: --gtol applies to the block and sequential solvers; {method} stops on its "
+                    "residual tolerances eps_abs/eps_rel (recorded in summary.json)")
+    if method == "fast":
+        return FastCMM(local_functions, **passed), passed
+    return SOLVERS[method](**passed), passed
+
+
+def _partial_writer(method: str, solve: Callable, out: Path, say: Callable[[str], None]) -> PartialColumns | None:
+    """A ``PartialColumns`` saver for ``method="sequential"`` when ``solve`` accepts ``callback=``, else None."""
+    import inspect
+
+    if method != "sequential" or "callback" not in inspect.signature(solve).parameters:
+        return None
+    return PartialColumns(out / PARTIAL, say)
+
+
+def cmd_eigs(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir) -> int:
+    import mesh
+    import numpy as np
+
+    say, t_all, out = _Progress(args.quiet, args.json), time.perf_counter(), run.path
+    m, lap, mesh_info = _load(args.mesh, args.laplacian)
+    _check_k(args.k, m.n_vertices)
+    say(f"mesh {mesh_info['source']}: n = {m.n_vertices} vertices, {m.n_faces} faces")
+    t = time.perf_counter()
+    eb = mesh.eigenbasis(lap, args.k, seed=args.seed)
+    t_eig = time.perf_counter() - t
+    evals, evecs = np.asarray(eb.evals), np.asarray(eb.evecs)
+    orth = float(np.max(np.abs(evecs.T @ (lap.A @ evecs) - np.eye(args.k))))
+    resid = float(np.max(np.linalg.norm(lap.W @ evecs - (lap.A @ evecs) * evals, axis=0)))
+    say(f"eigenpairs: k = {args.k}, λ = {', '.join(f'{v:.4g}' for v in evals[:6])}{' …' if args.k > 6 else ''}")
+    run.write("npz", "eigs.npz", lambda fh: np.savez_compressed(fh, eigenvalues=evals, eigenvectors=evecs,
+                                                                vertices=m.vertices, faces=m.faces))
+    summary = _summary_head(args, argv, mesh_info)
+    summary.update(parameters={"k": args.k, "laplacian": _LAPLACIAN_TEXT[args.laplacian]},
+                   eigenvalues=evals, diagnostics={"orthogonality": orth, "max_residual": resid},
+                   timings={"eigs": t_eig, "total": time.perf_counter() - t_all})
+    _finish(args, run, summary)
+    say(f"wrote {out / 'eigs.npz'} and {out / 'summary.json'}")
+    return 0
+
+
+_COLUMNS = ("smoothing", "c1_at_zero", "status", "objective", "dirichlet", "l1", "sparsity_1e-3",
+            "orthogonality", "iterations", "time_s")
+
+
+def smoothing_names(text: str) -> list[str]:
+    names = [s.strip() for s in text.split(",") if s.strip()]
+    bad = [s for s in names if s not in SMOOTHINGS]
+    if bad or not names:
+        raise CLIError(f"unknown smoothing(s) {bad or names}; choose from {', '.join(SMOOTHINGS)}")
+    return names
+
+
+def cmd_compare(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir) -> int:
+    import numpy as np
+    from objectives import smoothings
+    from objectives.cmm import compressed_modes
+
+    names = smoothing_names(args.smoothings)
+    say, t_all, out = _Progress(args.quiet, args.json), time.perf_counter(), run.path
+    m, lap, mesh_info = _load(args.mesh, args.laplacian)
+    _check_k(args.k, m.n_vertices)
+    mu = args.mu.resolve(m.n_vertices)
+    say(f"mesh {mesh_info['source']}: n = {m.n_vertices}; k = {args.k}, mu = {mu:.6g}, method = {args.method}")
+    rows: list[dict] = []
+    first_modes: list[tuple[str, Any]] = []
+    passed: dict[str, Any] = {}
+    for name in names:
+        row: dict[str, Any] = {"smoothing": name, "c1_at_zero": smoothings.info(name).c1_at_zero}
+        t = time.perf_counter()
+        try:
+            solver, passed = _solver(args, args.method, name)
+            r = compressed_modes(lap, args.k, mu, solver=solver, weighting=args.weighting, seed=args.seed,
+                                 start="eigen")
+            row.update(status=r.status, objective=r.objective, dirichlet=r.dirichlet, l1=r.l1,
+                       **{"sparsity_1e-3": r.sparsity["1e-3"]}, orthogonality=r.orthogonality,
+                       iterations=r.iterations, time_s=time.perf_counter() - t)
+            first_modes.append((name, r.modes[:, 0]))
+        except Exception as e:  # a smoothing that breaks the solver (f0) is reported, not fatal
+            row.update(status=f"failed: {type(e).__name__}: {' '.join(str(e).split())[:120]}",
+                       time_s=time.perf_counter() - t)
+        rows.append(row)
+        say(f"{name}: {row['status']}, objective = {row.get('objective', float('nan')):.6g}, "
+            f"{row['time_s']:.2f}s")
+    md, csv_text = _tables(rows)
+    run.write_text("markdown", "comparison.md", md)
+    run.write_text("csv", "comparison.csv", csv_text)
+    picture_error = None
+    if first_modes and not args.no_png:
+        from .render import contact_sheet
+
+        # the first mode of each smoothing, one row each (cf. thesis Fig. 6.10–6.11)
+        fields = np.stack([f for _, f in first_modes], axis=1)
+        picture_error = _picture(run, "comparison.png", lambda path: contact_sheet(
+            path, m.vertices, m.faces, fields, titles=[f"{n}: first mode" for n, _ in first_modes]))
+    summary = _summary_head(args, argv, mesh_info)
+    summary.update(parameters={"k": args.k, "mu": _mu_record(args.mu, mu), "method": args.method,
+                               "laplacian": args.laplacian,
+                               "weighting": args.weighting, "start": "eigen",
+                               "gtol": GTOL if args.gtol is None else args.gtol, "max_iters": args.max_iters},
+                   solver_options={k: v for k, v in passed.items() if k != "smoothing"},
+                   mu=mu, results=rows, timings={"total": time.perf_counter() - t_all})
+    if picture_error:
+        summary["picture_error"] = picture_error
+    _finish(args, run, summary)
+    say(f"wrote {out / 'comparison.md'}, {out / 'comparison.csv'} and {out / 'summary.json'}")
+    return 0
+
+
+def _fmt(v: Any) -> str:
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    return "" if v is None else str(v)
+
+
+def _tables(rows: list[dict]) -> tuple[str, str]:
+    """``(markdown, csv)`` texts of ``rows`` with the columns ``_COLUMNS``."""
+    import csv
+    import io
+
+    buf = io.StringIO(newline="")
+    w = csv.DictWriter(buf, fieldnames=_COLUMNS, extrasaction="ignore")
+    w.writeheader()
+    for r in rows:
+        w.writerow({c: r.get(c, "") for c in _COLUMNS})
+    lines = ["| " + " | ".join(_COLUMNS) + " |", "|" + "---|" * len(_COLUMNS)]
+    lines += ["| " + " | ".join(_fmt(r.get(c)) for c in _COLUMNS) + " |" for r in rows]
+    return "\n".join(lines) + "\n", buf.getvalue()
+
+
+def outputs_of(args: argparse.Namespace) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """``(names this run may write, names the command always owns)`` for ``RunDir``."""
+    png = () if getattr(args, "no_png", True) else ("png",)
+    if args.command == "modes":
+        return ("modes.npz", "modes.ply") + tuple(f"modes.{e}" for e in png), (PARTIAL, PARTIAL + PartialColumns.TMP_SUFFIX)
+    if args.command == "eigs":
+        return ("eigs.npz",), ()
+    return ("comparison.md", "comparison.csv") + tuple(f"comparison.{e}" for e in png), ()
