@@ -289,31 +289,30 @@ class RunDir:
             staged.unlink()
         return OutputError(f"could not write {self.path / name}: {_reason(e)}")
 
-    def write(self, role: str | None, name: str, fill: Callable[[BinaryIO], object]) -> None:
-        """Stage ``name`` by ``fill(fh)`` on a binary file; listed under ``role`` (None: not listed)."""
+    @contextlib.contextmanager
+    def _staged_path(self, name: str) -> Iterator[Path]:
+        """The staged path of ``name``; a failure removes it (an ``OSError`` becomes ``OutputError``)."""
         staged = self._stage(name)
         try:
-            with _staged_file(staged) as fh:
-                fill(fh)
+            yield staged
         except OSError as e:
             raise self._fail(staged, name, e) from None
         except BaseException:
             staged.unlink(missing_ok=True)
             raise
+
+    def write(self, role: str | None, name: str, fill: Callable[[BinaryIO], object]) -> None:
+        """Stage ``name`` by ``fill(fh)`` on a binary file; listed under ``role`` (None: not listed)."""
+        with self._staged_path(name) as staged, _staged_file(staged) as fh:
+            fill(fh)
         if role is not None:
             self.files[role] = {"name": name, **_digest(staged)}
 
     def write_path(self, role: str, name: str, fill: Callable[[Path], object]) -> None:
         """Stage ``name`` by ``fill(path)`` for writers that want a path (e.g. a PNG renderer)."""
-        staged = self._stage(name)
-        try:
+        with self._staged_path(name) as staged:
             fill(staged)
             _fsync_path(staged)
-        except OSError as e:
-            raise self._fail(staged, name, e) from None
-        except BaseException:
-            staged.unlink(missing_ok=True)
-            raise
         self.files[role] = {"name": name, **_digest(staged)}
 
     def write_text(self, role: str | None, name: str, text: str) -> None:
