@@ -120,17 +120,15 @@ def to_jsonable(obj: Any) -> Any:
     return obj
 
 
-def write_ply(target: Path | BinaryIO, vertices: Any, faces: Any, fields: Any, names: list[str] | None = None) -> None:
-    """ASCII PLY with one float64 vertex property per column of ``fields``, to a path or a binary file.
+def write_ply(target: BinaryIO, vertices: Any, faces: Any, fields: Any, names: list[str] | None = None) -> None:
+    """ASCII PLY with one float64 vertex property per column of ``fields``, to a binary file (the CLI
+    passes a staged file of ``cli.run_dir.RunDir``, which makes the write atomic).
 
     vertices: ``(n, 3)``; faces: ``(m, 3)``; fields: ``(n, k)``, written as
     properties ``mode_0 … mode_{k-1}`` (or ``names``) after x, y, z.
     """
     import numpy as np
 
-    if isinstance(target, (str, Path)):
-        with open(target, "wb") as fh:
-            return write_ply(fh, vertices, faces, fields, names)
     fields = np.asarray(fields, dtype=np.float64).reshape(vertices.shape[0], -1)
     names = names or [f"mode_{j}" for j in range(fields.shape[1])]
     header = ["ply", "format ascii 1.0", "comment stiefel-cmm compressed manifold modes",

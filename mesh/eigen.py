@@ -24,6 +24,7 @@ import scipy.sparse.linalg as spla
 from jaxtyping import Float
 
 from stiefel.sparse_factor import SymmetricFactor
+from stiefel.validation import check_finite, check_number, is_integer
 
 from .errors import MeshError
 from .laplacian import Laplacian
@@ -56,35 +57,21 @@ def _spectral_scale(lap: Laplacian) -> float:
     return float(np.max(np.abs(w) / np.maximum(np.abs(a), np.finfo(float).tiny)))
 
 
-def _is_int(v) -> bool:
-    return isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_))
-
-
-def _check_finite(name: str, M) -> None:
-    data = M.data if sp.issparse(M) else np.asarray(M)
-    bad = int(np.sum(~np.isfinite(data)))
-    if bad:
-        raise EigenInputError(f"{name} has {bad} non-finite entries (NaN or inf): the eigenproblem is undefined; "
-                              "rebuild the Laplacian from a clean mesh (mesh.load repairs or refuses bad vertices)")
-
-
 def _check_inputs(lap: Laplacian, k, sigma, tol, seed) -> None:
     """Everything ``eigenbasis`` needs, before any factorisation (``EigenInputError`` naming the cause)."""
     n = lap.n
-    if not _is_int(k) or not 1 <= int(k) < n:
+    if not is_integer(k) or not 1 <= int(k) < n:
         raise EigenInputError(
             f"k must be an integer with 1 ≤ k < n = {n} (ARPACK's shift-invert Lanczos needs k < n; there is "
             f"no dense fallback: for all n eigenpairs of a small mesh use scipy.linalg.eigh(W.toarray(), "
             f"A.toarray())), got k = {k!r}")
-    if sigma is not None and not (isinstance(sigma, (int, float, np.integer, np.floating))
-                                  and not isinstance(sigma, bool) and np.isfinite(sigma)):
-        raise EigenInputError(f"sigma must be a finite number (or None: −1e-8·s), got {sigma!r}")
-    if not (isinstance(tol, (int, float, np.integer, np.floating)) and not isinstance(tol, bool) and tol >= 0):
-        raise EigenInputError(f"tol must be a number ≥ 0 (0: machine precision), got {tol!r}")
-    if not _is_int(seed) or seed < 0:
+    if sigma is not None:
+        check_number("sigma (None: −1e-8·s)", sigma, error=EigenInputError)
+    check_number("tol (0: machine precision)", tol, low=0, finite=False, error=EigenInputError)
+    if not is_integer(seed) or seed < 0:
         raise EigenInputError(f"seed must be an integer ≥ 0, got {seed!r}")
-    _check_finite("W", lap.W)
-    _check_finite("A", lap.A)
+    for name, M in (("W", lap.W), ("A", lap.A)):
+        check_finite(name, M, error=EigenInputError)
 
 
 def eigenbasis(
