@@ -24,9 +24,10 @@ float64: the solvers compute in the dtype of the manifold's operator, which is
 float64 when JAX's x64 mode is on. Library code never changes JAX's global
 configuration; enable it in your program with
 ``jax.config.update("jax_enable_x64", True)``, or pass ``dtype=jnp.float32``
-explicitly to work in single precision. (The thread-local ``jax.enable_x64``
-context works for diagonal and dense M, but sparse solves run as host
-callbacks, which see only the global flag.)
+explicitly to work in single precision. Sparse solves (a sparse M, the
+``(W + σA)⁻¹`` preconditioner) run as CHOLMOD custom calls (``stiefel.ffi_solve``, through
+sparsax) when the global x64 flag is on, and as host callbacks otherwise; the thread-local
+``jax.enable_x64`` context works for diagonal and dense M only.
 """
 
 from .block_solver import METHODS, BlockOptions, minimize, solver_for

@@ -11,9 +11,11 @@ shape ``(n,)`` or ``(n, k)``. Three implementations:
   largest row length). ``mv`` is ``w`` fused gathers with no scatter, which on
   CPU beat BCOO and ``segment_sum`` (see ``bench/RESULTS.md``). ``solve``
   uses one sparse factorisation computed on the host at construction
-  (``stiefel.sparse_factor.SymmetricFactor``: CHOLMOD, QDLDL or SuperLU) and
-  called through ``jax.pure_callback`` inside ``lax.custom_linear_solve``, so it is jittable and differentiable. The
-  matrix is never densified.
+  (``stiefel.ffi_solve``: CHOLMOD as an XLA custom call through ``sparsax``, when JAX's x64 mode is
+  on — no Python callback, so compiled solvers are served from JAX's persistent cache; otherwise
+  ``stiefel.sparse_factor.SymmetricFactor`` — CHOLMOD, QDLDL or SuperLU — on the host through
+  ``jax.pure_callback``), inside ``lax.custom_linear_solve``, so it is jittable and differentiable.
+  The matrix is never densified.
 
 ``as_operator`` builds the right one and, with ``check=True``, validates that
 the matrix is symmetric positive definite (raising ``NotSPDError``).
@@ -34,6 +36,7 @@ import scipy.sparse as sp
 from jax.custom_derivatives import SymbolicZero
 from jaxtyping import Array, Float, Int
 
+from . import ffi_solve
 from .errors import NotSPDError, ShapeError
 from .sparse_factor import SymmetricFactor
 from .validation import check_finite
@@ -169,23 +172,30 @@ class SparseOperator(LinearOperator):
     """A sparse symmetric matrix as a padded neighbour table (ELL format).
 
     ``cols[i, j]`` is the column of the ``j``-th stored entry of row ``i`` and
-    ``vals[i, j]`` its value (padding: column ``i``, value 0).
+    ``vals[i, j]`` its value (padding: column ``i``, value 0). ``chol`` (the matrix as CHOLMOD
+    custom-call arrays, ``stiefel.ffi_solve``) or ``factor`` (a host factorisation behind a
+    callback) serves ``solve``; at most one is set.
     """
 
     cols: Int[Array, "n w"]
     vals: Float[Array, "n w"]
+    chol: ffi_solve.CholeskyArrays | None = None
     factor: Any = eqx.field(static=True, default=None)
     csr: Any = eqx.field(static=True, default=None)
     vmap_method: str = eqx.field(static=True, default="sequential")
 
     @classmethod
-    def from_scipy(cls, matrix, *, factor: bool = False, dtype=None,
-                   vmap_method: str = "sequential") -> "SparseOperator":
-        """Build from any ``scipy.sparse`` matrix; ``factor=True`` prepares ``solve``.
+    def from_scipy(cls, matrix, *, factor: bool = False, dtype=None, vmap_method: str = "sequential",
+                   solve_backend: str | None = None) -> "SparseOperator":
+        """Build from any ``scipy.sparse`` matrix; ``factor=True`` prepares ``solve`` (and checks that
+        the matrix is positive definite: ``NotSPDError``).
 
-        ``vmap_method`` is how ``solve``'s host callback batches under ``jax.vmap``:
-        ``"sequential"`` (one host call per batch member) or ``"expand_dims"`` (one host
-        call for the whole batch; ``bench/bench_batch.py`` compares them).
+        ``solve_backend``: ``"ffi"`` (CHOLMOD as an XLA custom call, ``stiefel.ffi_solve``; needs
+        sparsax and JAX's x64 mode), ``"callback"`` (a host factorisation behind ``jax.pure_callback``)
+        or None (``"ffi"`` where available). ``vmap_method`` is how the callback batches under
+        ``jax.vmap``: ``"sequential"`` (one host call per batch member) or ``"expand_dims"`` (one
+        host call for the whole batch; ``bench/bench_batch.py`` compares them); the custom call
+        always solves a batch in one native call.
         """
         if vmap_method not in ("sequential", "expand_dims"):
             raise ValueError(f"vmap_method must be 'sequential' or 'expand_dims', got {vmap_method!r}")
@@ -202,12 +212,20 @@ class SparseOperator(LinearOperator):
         vals = np.zeros((n, width), dtype=np.float64)
         cols[rows, slot] = csr.indices
         vals[rows, slot] = csr.data
-        host = None
-        if factor:
+        if solve_backend not in (None, "ffi", "callback"):
+            raise ValueError(f"solve_backend must be 'ffi', 'callback' or None, got {solve_backend!r}")
+        if solve_backend == "ffi" and not ffi_solve.available():
+            raise ValueError("solve_backend='ffi' needs the sparsax package and JAX's x64 mode "
+                             "(jax.config.update('jax_enable_x64', True))")
+        host, chol = None, None
+        if factor and solve_backend != "callback" and ffi_solve.available():
+            chol = ffi_solve.CholeskyArrays.from_scipy(csr)
+        elif factor:
             host = _HostFactor(SymmetricFactor(csr), dtype, _fingerprint(csr))
         return cls(
             cols=jnp.asarray(cols, dtype=jnp.int32),
             vals=jnp.asarray(vals, dtype=dtype),
+            chol=chol,
             factor=host,
             csr=_Frozen(csr),
             vmap_method=vmap_method,
@@ -234,6 +252,9 @@ class SparseOperator(LinearOperator):
         return out
 
     def solve(self, y):
+        if self.chol is not None:
+            chol = self.chol
+            return jax.lax.custom_linear_solve(self.mv, y, lambda _matvec, b: chol.solve(b), symmetric=True)
         if self.factor is None:
             raise ValueError("this SparseOperator was built without factor=True; no solve available")
         host, method = self.factor, self.vmap_method

@@ -9,8 +9,9 @@ the ELL products' multiply-adds) runs on each device's rows; reductions over row
 traces, norms) become partial sums plus an all-reduce of ``k × k`` blocks; the ELL gathers
 ``X[cols]`` read neighbours' rows across shard boundaries, which XLA resolves by collectives.
 
-Preconditioners: a host callback (the sparse factorisation behind ``SparseOperator.solve`` /
-``shifted_inverse``) cannot be partitioned — it would gather ``X`` onto one host. Use none, or a diagonal one such
+Preconditioners: a sparse factorisation (behind ``SparseOperator.solve`` / ``shifted_inverse``: a CHOLMOD
+custom call or a host callback) factors the whole matrix and cannot be partitioned — it would gather ``X``
+onto one device. Use none, or a diagonal one such
 as ``DiagonalOperator(diag(W) + σ·diag(M))`` (Jacobi), which shards by rows like ``M``.
 
 Multi-host: the same code runs on several hosts, one process per host. Call
@@ -98,10 +99,12 @@ def solve_sharded(F: Callable, manifold: GeneralizedStiefel, X0: Float[Array, "n
       ``Result`` (``wall_time = compile_time = 0``) with ``x`` a global array sharded by rows.
     """
     if isinstance(manifold.op, SparseOperator):
-        raise StiefelError("a sparse M needs M⁻¹ by SuperLU on the host, which cannot be sharded; the sharded "
-                           "path supports a diagonal M (e.g. a lumped mass matrix) or a dense one")
-    if isinstance(preconditioner, SparseOperator) and preconditioner.factor is not None:
-        raise StiefelError("a SuperLU (host callback) preconditioner cannot be sharded; use None or a "
+        raise StiefelError("a sparse M needs M⁻¹ by a sparse Cholesky factorisation of the whole matrix, which "
+                           "cannot be sharded; the sharded path supports a diagonal M (e.g. a lumped mass matrix) "
+                           "or a dense one")
+    if isinstance(preconditioner, SparseOperator) and (preconditioner.factor is not None
+                                                       or preconditioner.chol is not None):
+        raise StiefelError("a sparse-factorisation preconditioner (CHOLMOD) cannot be sharded; use None or a "
                            "DiagonalOperator (Jacobi, e.g. diag(W) + σ·diag(M))")
     if preconditioner is not None and not isinstance(preconditioner, LinearOperator):
         raise StiefelError("preconditioner must be a stiefel LinearOperator (a pytree that can be sharded)")

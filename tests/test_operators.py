@@ -31,9 +31,11 @@ def test_kinds_are_chosen_by_input():
     assert isinstance(op, SparseOperator) and op.width == 3  # tridiagonal: 3 slots per row, not n
 
 
-def test_sparse_solve_is_jittable_and_differentiable():
+@pytest.mark.parametrize("backend", ["ffi", "callback"])
+def test_sparse_solve_is_jittable_and_differentiable(backend):
     M = metric_matrix("sparse", 11)
-    op = as_operator(M)
+    op = SparseOperator.from_scipy(M, factor=True, solve_backend=backend)
+    assert (op.chol is not None) == (backend == "ffi") and (op.factor is not None) == (backend == "callback")
     Y = jnp.asarray(np.random.default_rng(0).standard_normal((11, 2)))
     Md = dense_of(M)
     np.testing.assert_allclose(jax.jit(lambda y: op.solve(y))(Y), np.linalg.solve(Md, Y), atol=1e-12)
@@ -43,6 +45,52 @@ def test_sparse_solve_is_jittable_and_differentiable():
     np.testing.assert_allclose(g, np.linalg.solve(Md, C), atol=1e-12)
     v = jax.vmap(op.solve, in_axes=1, out_axes=1)(Y)
     np.testing.assert_allclose(v, np.linalg.solve(Md, Y), atol=1e-12)
+    # forward mode, and the derivative with respect to the matrix's values (through the product rule of
+    # custom_linear_solve): d(M⁻¹y)[dM] = −M⁻¹ dM M⁻¹ y
+    t = jax.jvp(op.solve, (Y,), (C,))[1]
+    np.testing.assert_allclose(t, np.linalg.solve(Md, C), atol=1e-12)
+    dvals = jnp.where((op.cols == jnp.arange(11)[:, None]) & (op.vals != 0), 1.0, 0.0)  # dM = I (not the padding)
+    rebuilt = lambda v: SparseOperator(cols=op.cols, vals=v, chol=op.chol, factor=op.factor, csr=op.csr)  # noqa: E731
+    dx = jax.jvp(lambda v: rebuilt(v).solve(Y), (op.vals,), (dvals,))[1]
+    np.testing.assert_allclose(dx, -np.linalg.solve(Md, np.linalg.solve(Md, Y)), atol=1e-11)
+
+
+def test_ffi_solve_has_no_host_callback_and_batches_matrices():
+    """The default sparse solve is an XLA custom call: no callback in the program (so JAX's persistent
+    cache can serve it); under vmap over different matrices each member is solved with its own."""
+    M = metric_matrix("sparse", 12, seed=3)
+    op = as_operator(M)
+    assert op.chol is not None and op.factor is None
+    Y = jnp.ones((12, 3))
+    text = str(jax.make_jaxpr(lambda y: op.solve(y))(Y))
+    assert "callback" not in text and "custom_linear_solve" in text
+    cb = SparseOperator.from_scipy(M, factor=True, solve_backend="callback")
+    assert "callback" in str(jax.make_jaxpr(lambda y: cb.solve(y))(Y))
+    vals = jnp.stack([op.chol.vals, 2.0 * op.chol.vals])
+    solve = jax.vmap(lambda v: type(op.chol)(rows=op.chol.rows, cols=op.chol.cols, vals=v, n=12).solve(Y))
+    out = solve(vals)
+    Md = dense_of(M)
+    np.testing.assert_allclose(out[0], np.linalg.solve(Md, Y), atol=1e-12)
+    np.testing.assert_allclose(out[1], np.linalg.solve(2 * Md, Y), atol=1e-12)
+    # float32 operands are solved in float64 and returned in float32
+    np.testing.assert_allclose(op.chol.solve(Y.astype(jnp.float32)), np.linalg.solve(Md, Y), rtol=1e-6)
+    assert op.chol.solve(Y.astype(jnp.float32)).dtype == jnp.float32
+
+
+def test_solve_backend_is_checked_and_switchable(monkeypatch):
+    from stiefel import ffi_solve
+
+    M = metric_matrix("sparse", 6)
+    with pytest.raises(ValueError, match="solve_backend"):
+        SparseOperator.from_scipy(M, factor=True, solve_backend="cholmod")
+    monkeypatch.setenv(ffi_solve.MODE_ENV, "off")
+    assert not ffi_solve.available()
+    assert as_operator(M).factor is not None  # the callback path
+    with pytest.raises(ValueError, match="sparsax"):
+        SparseOperator.from_scipy(M, factor=True, solve_backend="ffi")
+    monkeypatch.setenv(ffi_solve.MODE_ENV, "fastest")
+    with pytest.raises(ValueError, match=ffi_solve.MODE_ENV):
+        ffi_solve.available()
 
 
 def test_sparse_matvec_on_irregular_rows():
@@ -88,9 +136,10 @@ def test_equal_matrices_give_equal_static_parts():
     """Operators built from equal matrices compare equal in their static fields (JAX's compile cache
     reuses the executable); different matrices do not."""
     M = metric_matrix("sparse", 9)
-    a, b = as_operator(M), as_operator(M.copy())
+    build = lambda M: SparseOperator.from_scipy(M, factor=True, solve_backend="callback")  # noqa: E731
+    a, b = build(M), build(M.copy())
     assert a.factor == b.factor and hash(a.factor) == hash(b.factor) and a.csr == b.csr
-    c = as_operator(M * 2.0)
+    c = build(M * 2.0)
     assert a.factor != c.factor and a.csr != c.csr
 
 
