@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
 import time
 import warnings
@@ -17,6 +18,7 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 from .outputs import PROG, MuSpec, PartialColumns, stderr_line, to_jsonable, versions, write_ply
+from .progress import SolveProgress
 from .run_dir import RunDir
 
 __all__ = ["CLIError", "cmd_modes", "cmd_eigs", "cmd_compare", "outputs_of", "smoothing_names", "GTOL", "METHODS",
@@ -99,6 +101,7 @@ def _check_k(k: int, n: int) -> None:
 def _summary_head(args: argparse.Namespace, argv: Sequence[str] | None, mesh_info: dict) -> dict:
     return {"command": args.command, "argv": list(argv) if argv is not None else sys.argv[1:],
             "mesh": mesh_info, "seed": args.seed, "versions": versions(),
+            "compilation_cache": getattr(args, "cache_used", None),
             "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
 
 
@@ -126,6 +129,27 @@ def _picture(run: RunDir, name: str, fill: Callable[[Path], object]) -> str | No
     return None
 
 
+def _interrupted_solve(args: argparse.Namespace, status: str) -> dict | None:
+    """For a solve that stopped on Ctrl-C/SIGTERM (status ``interrupted``): take the signal over from
+    ``cli.main`` (the outputs are written, a second signal still aborts them) and describe it."""
+    signals = getattr(args, "signals", None)
+    if status != "interrupted" or signals is None or not signals.received:
+        return None
+    signum = signals.received[-1]
+    signals.received.clear()
+    name = "SIGTERM" if signum == signal.SIGTERM else "SIGINT"
+    return {"signal": name, "exit_code": 143 if name == "SIGTERM" else 130,
+            "note": "the solve was stopped by the signal; the outputs hold the iterate it had reached"}
+
+
+def _exit_code(interrupt: dict | None) -> int:
+    if interrupt is None:
+        return 0
+    stderr_line(f"{PROG}: {'terminated' if interrupt['signal'] == 'SIGTERM' else 'interrupted'} during the solve; "
+                "the modes reached were written (status interrupted)")
+    return int(interrupt["exit_code"])
+
+
 def _finish(args: argparse.Namespace, run: RunDir, summary: dict) -> None:
     """Commit the run (``summary.json`` last); ``--json`` prints the summary as written."""
     written = run.commit(summary, _encode)
@@ -146,7 +170,7 @@ def cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir)
     t = time.perf_counter()
     m, lap, mesh_info = _load(args.mesh, args.laplacian)
     _check_k(args.k, m.n_vertices)
-    timings["load_and_laplacian"] = time.perf_counter() - t
+    timings["load_s"] = time.perf_counter() - t
     mu = args.mu.resolve(m.n_vertices)
     say(f"mesh {mesh_info['source']}: n = {m.n_vertices} vertices, {m.n_faces} faces")
     extra: dict[str, Any] = {}
@@ -156,7 +180,7 @@ def cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir)
         d = min(d, m.n_vertices)
         t = time.perf_counter()
         U = mesh.local_functions(m, n_samples=d).U
-        timings["local_functions"] = time.perf_counter() - t
+        timings["local_functions_s"] = time.perf_counter() - t
         say(f"local functions: d = {d}")
     solver, passed = _solver(args, args.method, args.smoothing, local_functions=U)
     say(f"solving: k = {args.k}, mu = {mu:.6g} ({args.mu.text}), method = {args.method}, "
@@ -165,10 +189,17 @@ def cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir)
     if partial is not None:
         extra["callback"] = partial
     t = time.perf_counter()
-    res = compressed_modes(lap, args.k, mu, solver=solver, weighting=args.weighting, seed=args.seed, **extra)
-    timings["solve_total"] = time.perf_counter() - t
-    timings["solve_wall"] = float(res.wall_time)
-    timings["compile"] = float(res.compile_time)
+    bar = SolveProgress(quiet=args.quiet, label=f"{args.method}")
+    try:
+        res = compressed_modes(lap, args.k, mu, solver=solver, weighting=args.weighting, seed=args.seed,
+                               progress=bar, **extra)
+    finally:
+        bar.close()
+    solve_total = time.perf_counter() - t
+    timings.update(compile_s=float(res.compile_time), solve_s=float(res.wall_time),
+                   setup_s=timings.pop("load_s") + timings.pop("local_functions_s", 0.0)
+                   + max(0.0, solve_total - res.wall_time - res.compile_time))
+    interrupt = _interrupted_solve(args, res.status)
     say(f"solved: status = {res.status}, iterations = {res.iterations}, objective = {res.objective:.6g}, "
         f"orthogonality = {res.orthogonality:.2e}")
 
@@ -189,20 +220,22 @@ def cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir)
         titles = [f"mode {j}  λ̃ = {lam:.4g}" for j, lam in enumerate(res.compressed_eigenvalues)]
         picture_error = _picture(run, "modes.png", lambda path: contact_sheet(
             path, m.vertices, m.faces, res.modes, titles=titles))
-    timings["write"] = time.perf_counter() - t
-    timings["total"] = time.perf_counter() - t_all
     summary = _summary_head(args, argv, mesh_info)
     summary.update(parameters=params, solver_options=passed, mu=mu, diagnostics=diag,
                    compressed_eigenvalues=res.compressed_eigenvalues, timings=timings,
                    partial_results=_PARTIAL_NOTE if partial is None else "modes.partial.npz during the solve")
+    if interrupt is not None:
+        summary["interrupted"] = interrupt
     if picture_error:
         summary["picture_error"] = picture_error
+    timings["write_s"] = time.perf_counter() - t  # the commit (summary.json and the move) is not included
+    timings["total_s"] = time.perf_counter() - t_all
     _finish(args, run, summary)
     say(f"wrote {out / 'modes.npz'} and {out / 'modes.ply'}")
     if "png" in run.files:
         say(f"wrote {out / 'modes.png'}")
     say(f"wrote {out / 'summary.json'}")
-    return 0
+    return _exit_code(interrupt)
 
 
 _PARTIAL_NOTE = ("modes are written when the solve finishes (only --method sequential reports its columns "
@@ -243,10 +276,12 @@ def cmd_eigs(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir) 
     say, t_all, out = _Progress(args.quiet, args.json), time.perf_counter(), run.path
     m, lap, mesh_info = _load(args.mesh, args.laplacian)
     _check_k(args.k, m.n_vertices)
+    t_setup = time.perf_counter() - t_all
     say(f"mesh {mesh_info['source']}: n = {m.n_vertices} vertices, {m.n_faces} faces")
     t = time.perf_counter()
     eb = mesh.eigenbasis(lap, args.k, seed=args.seed)
     t_eig = time.perf_counter() - t
+    t = time.perf_counter()
     evals, evecs = np.asarray(eb.evals), np.asarray(eb.evecs)
     orth = float(np.max(np.abs(evecs.T @ (lap.A @ evecs) - np.eye(args.k))))
     resid = float(np.max(np.linalg.norm(lap.W @ evecs - (lap.A @ evecs) * evals, axis=0)))
@@ -256,14 +291,15 @@ def cmd_eigs(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir) 
     summary = _summary_head(args, argv, mesh_info)
     summary.update(parameters={"k": args.k, "laplacian": _LAPLACIAN_TEXT[args.laplacian]},
                    eigenvalues=evals, diagnostics={"orthogonality": orth, "max_residual": resid},
-                   timings={"eigs": t_eig, "total": time.perf_counter() - t_all})
+                   timings={"compile_s": 0.0, "solve_s": t_eig, "setup_s": t_setup,
+                            "write_s": time.perf_counter() - t, "total_s": time.perf_counter() - t_all})
     _finish(args, run, summary)
     say(f"wrote {out / 'eigs.npz'} and {out / 'summary.json'}")
     return 0
 
 
 _COLUMNS = ("smoothing", "c1_at_zero", "status", "objective", "dirichlet", "l1", "sparsity_1e-3",
-            "orthogonality", "iterations", "time_s")
+            "orthogonality", "iterations", "time_s", "compile_s")
 
 
 def smoothing_names(text: str) -> list[str]:
@@ -285,26 +321,39 @@ def cmd_compare(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDi
     _check_k(args.k, m.n_vertices)
     mu = args.mu.resolve(m.n_vertices)
     say(f"mesh {mesh_info['source']}: n = {m.n_vertices}; k = {args.k}, mu = {mu:.6g}, method = {args.method}")
+    t_setup = time.perf_counter() - t_all
     rows: list[dict] = []
     first_modes: list[tuple[str, Any]] = []
     passed: dict[str, Any] = {}
+    interrupt = None
+    totals = {"compile_s": 0.0, "solve_s": 0.0}
     for name in names:
         row: dict[str, Any] = {"smoothing": name, "c1_at_zero": smoothings.info(name).c1_at_zero}
+        if interrupt is not None:
+            rows.append({**row, "status": "not run (interrupted)"})
+            continue
         t = time.perf_counter()
+        bar = SolveProgress(quiet=args.quiet, label=name)
         try:
             solver, passed = _solver(args, args.method, name)
             r = compressed_modes(lap, args.k, mu, solver=solver, weighting=args.weighting, seed=args.seed,
-                                 start="eigen")
+                                 start="eigen", progress=bar)
             row.update(status=r.status, objective=r.objective, dirichlet=r.dirichlet, l1=r.l1,
                        **{"sparsity_1e-3": r.sparsity["1e-3"]}, orthogonality=r.orthogonality,
-                       iterations=r.iterations, time_s=time.perf_counter() - t)
+                       iterations=r.iterations, time_s=time.perf_counter() - t, compile_s=r.compile_time)
+            totals["compile_s"] += r.compile_time
+            totals["solve_s"] += r.wall_time
             first_modes.append((name, r.modes[:, 0]))
+            interrupt = _interrupted_solve(args, r.status)
         except Exception as e:  # a smoothing that breaks the solver (f0) is reported, not fatal
             row.update(status=f"failed: {type(e).__name__}: {' '.join(str(e).split())[:120]}",
                        time_s=time.perf_counter() - t)
+        finally:
+            bar.close()
         rows.append(row)
         say(f"{name}: {row['status']}, objective = {row.get('objective', float('nan')):.6g}, "
             f"{row['time_s']:.2f}s")
+    t = time.perf_counter()
     md, csv_text = _tables(rows)
     run.write_text("markdown", "comparison.md", md)
     run.write_text("csv", "comparison.csv", csv_text)
@@ -322,12 +371,18 @@ def cmd_compare(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDi
                                "weighting": args.weighting, "start": "eigen",
                                "gtol": GTOL if args.gtol is None else args.gtol, "max_iters": args.max_iters},
                    solver_options={k: v for k, v in passed.items() if k != "smoothing"},
-                   mu=mu, results=rows, timings={"total": time.perf_counter() - t_all})
+                   mu=mu, results=rows)
+    if interrupt is not None:
+        summary["interrupted"] = interrupt
     if picture_error:
         summary["picture_error"] = picture_error
+    write_s, total_s = time.perf_counter() - t, time.perf_counter() - t_all
+    # setup: the mesh and Laplacian, and each solve's eigenbasis and factorisation
+    setup_s = t_setup + max(0.0, total_s - t_setup - write_s - totals["compile_s"] - totals["solve_s"])
+    summary["timings"] = {**totals, "setup_s": setup_s, "write_s": write_s, "total_s": total_s}
     _finish(args, run, summary)
     say(f"wrote {out / 'comparison.md'}, {out / 'comparison.csv'} and {out / 'summary.json'}")
-    return 0
+    return _exit_code(interrupt)
 
 
 def _fmt(v: Any) -> str:

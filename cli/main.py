@@ -9,8 +9,13 @@ Subcommands::
 Without ``MESH`` the built-in demo surface is used (``cli.demo_mesh``). ``--mu``
 is absolute (``5.2``) or relative to the vertex count (``0.01n`` = 0.01·n); the
 resolved absolute μ is recorded in ``summary.json``. Progress goes to stdout, one
-line per stage (none with ``--quiet``); ``--json`` prints exactly one JSON object
-(the summary) on stdout and nothing else there. Errors print one line
+line per stage, and the solver's progress to stderr (a bar on a terminal, a line every
+2 s otherwise; none of either with ``--quiet``); ``--json`` prints exactly one JSON object
+(the summary) on stdout and nothing else there.
+
+Compilation is cached across runs in JAX's persistent cache (``cli.cache``: ``--cache-dir``,
+``$STIEFEL_CACHE_DIR``, ``--no-cache``); ``summary.json``'s ``timings`` separate ``compile_s``,
+``solve_s``, ``setup_s`` (mesh, Laplacian, eigenbasis, factorisation), ``write_s`` and ``total_s``. Errors print one line
 ``stiefel: error: …`` on stderr: exit code 2 for bad arguments, 1 for bad input
 (missing file, non-manifold mesh, …).
 
@@ -28,7 +33,10 @@ claimed by one subcommand before anything is loaded or solved; files are staged 
 swapped in only when all are written, ``summary.json`` last, listing each file with its
 size and SHA-256. An interrupt or a write error leaves the previous run's outputs as they
 were. Ctrl-C prints ``stiefel: interrupted`` (exit 130), SIGTERM ``stiefel: terminated``
-(exit 143), without a traceback — also during the imports of JAX.
+(exit 143), without a traceback — also during the imports of JAX. An interrupt *during a solve*
+that reports progress (``--method block``) stops it at the next chunk of iterations: the modes
+reached are written, marked ``"status": "interrupted"`` in ``summary.json``, and the exit code is
+still 130 (143).
 
 Partial results: for ``--method sequential`` the finished columns are saved to
 ``DIR/modes.partial.npz`` as they complete (``compressed_modes(callback=)``, passed
@@ -109,8 +117,11 @@ def _common(p: argparse.ArgumentParser, k_default: int) -> None:
     p.add_argument("-k", type=_positive_int, default=k_default, help=f"number of modes (default {k_default})")
     p.add_argument("--out", type=Path, default=None, help="output directory (created; default: ./stiefel-<command>)")
     p.add_argument("--seed", type=_seed_type, default=0, help="random seed, 0 … 2³²−1 (default 0)")
-    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.add_argument("--quiet", action="store_true", help="no progress lines or progress bar")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object on stdout")
+    p.add_argument("--cache-dir", type=Path, default=None,
+                   help="JAX compilation cache (default: $STIEFEL_CACHE_DIR, else the user cache directory)")
+    p.add_argument("--no-cache", action="store_true", help="compile without the persistent compilation cache")
     p.add_argument("--laplacian", choices=("cotangent", "robust"), default="cotangent",
                    help="cotangent (default) or robust: intrinsic Delaunay on the tufted cover "
                         "(non-negative weights; loads non-manifold meshes)")
@@ -192,8 +203,14 @@ def _main(argv: Sequence[str] | None, signals: _Signals) -> int:
     jax.config.update("jax_enable_x64", True)
     import mesh
 
+    from .cache import enable as enable_cache
     from .commands import CLIError
     from .run_dir import OutputError
+
+    args.cache_used, warning = enable_cache(args.cache_dir, args.no_cache)
+    if warning:
+        stderr_line(f"{PROG}: warning: {warning}")
+    args.signals = signals
 
     signals.check()  # the imports are done: from here on a signal interrupts at once
     try:

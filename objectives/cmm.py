@@ -33,6 +33,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from stiefel.driver import Progress
 from stiefel.errors import NotSPDError, ParameterError, ShapeError
 from stiefel.sparse_factor import SymmetricFactor
 from stiefel.validation import (check_count, check_finite, check_full_rank, check_nonnegative, check_number,
@@ -179,6 +180,9 @@ def compressed_modes(
     seed: int = 0,
     dtype=None,
     callback: Callable | None = None,
+    progress: Callable | None = None,
+    stop=None,
+    verbose: bool = False,
 ) -> CMMResult:
     """Compressed manifold modes of a Laplacian ``(W, A)``.
 
@@ -196,6 +200,13 @@ def compressed_modes(
         solvers run in float64 on the host.
       callback: ``callback(j, info)`` after each finished column, for solvers with
         ``supports_callback`` (``SequentialCMM``).
+      progress: ``progress(stiefel.Progress)`` — iteration, objective, gradient norm, continuation stage,
+        elapsed and estimated remaining seconds — a few times per second from solvers with
+        ``supports_progress`` (``BlockCMM``; it runs compiled chunks of iterations, ``stiefel.driver``);
+        the others report once, when they finish. ``verbose=True`` prints these reports on stderr.
+      stop: a ``threading.Event`` (or a callable returning True) checked between chunks by solvers with
+        ``supports_progress``; when set — or on Ctrl-C during such a solve — the result holds the modes
+        reached, with status ``"interrupted"``.
 
     Everything is checked before any work: ``ParameterError`` / ``SolverOptionError`` for options,
     ``NonFiniteError`` for NaN/inf in W, A or the start, ``RankDeficientError`` for a start whose
@@ -221,6 +232,9 @@ def compressed_modes(
         _check_start(start, a)
     if not solver.supports_callback:
         _no_callback(solver, callback)
+    if verbose:
+        progress = _printer(progress)
+    live = dict(progress=progress, stop=stop) if solver.supports_progress else {}
     t_setup = time.perf_counter()
     evals, evecs = first_eigenpairs(W, a, max(k, 2)) if solver.needs_eigenpairs(kind) else (None, None)
     if solver.restricted:
@@ -233,8 +247,12 @@ def compressed_modes(
         X0 = np.asarray(start, dtype=np.float64)
     setup_time = time.perf_counter() - t_setup
     run = solver.solve(W, a, k, mu, Start(kind, X0, evals), weighting=weighting, seed=seed, dtype=dtype,
-                       callback=callback)
+                       callback=callback, **live)
     Psi, lam, dirichlet_part, l1_part, sparsity, orth = _diagnostics(W, a, mu, weighting, run.Psi)
+    if progress is not None and not live:  # one report at the end
+        progress(Progress(iteration=int(run.iterations), max_iters=int(getattr(solver, "max_iters", run.iterations)),
+                          objective=dirichlet_part + l1_part, grad_norm=float("nan"), elapsed=run.wall_time,
+                          remaining=0.0, method=solver.name))
     params = dict(k=k, mu=mu, method=solver.name, weighting=weighting, seed=seed, start=kind, **solver.as_dict(),
                   **run.info, setup_time=setup_time)
     return CMMResult(
@@ -242,6 +260,18 @@ def compressed_modes(
         l1=l1_part, sparsity=sparsity, orthogonality=orth, iterations=int(run.iterations), wall_time=run.wall_time,
         compile_time=run.compile_time, status=run.status, method=solver.name, params=params, history=run.history,
     )
+
+
+def _printer(progress: Callable | None) -> Callable:
+    """A ``progress`` that prints each report on stderr (then calls ``progress``, if any)."""
+    import sys
+
+    def report(info: Progress) -> None:
+        print(f"compressed_modes [{info.method}] {info.line()}", file=sys.stderr, flush=True)
+        if progress is not None:
+            progress(info)
+
+    return report
 
 
 def select_mu(lap, k: int, target_sparsity: float, *, threshold: str = "1e-3", mu_lo: float | None = None,

@@ -74,6 +74,8 @@ class CMMSolver:
     restricted: ClassVar[bool] = False
     #: True when ``solve`` accepts ``callback=`` (``SequentialCMM``)
     supports_callback: ClassVar[bool] = False
+    #: True when ``solve`` accepts ``progress=`` and ``stop=`` (``BlockCMM``)
+    supports_progress: ClassVar[bool] = False
 
     def needs_eigenpairs(self, start: str) -> bool:
         """Whether ``compressed_modes`` must compute the first ``max(k, 2)`` eigenpairs for a ``start`` kind."""

@@ -42,17 +42,21 @@ def _continuation(eps: float, steps: int, start: float) -> list[float]:
 
 
 def _block_rounds(F, manifold, X, P, *, gtol: float, ftol: float, max_iters: int, budget: int,
-                  refresh: int | None = None, optimizer: str = "cg", ftol_window: int = 20):
+                  refresh: int | None = None, optimizer: str = "cg", ftol_window: int = 20, progress=None, stop=None):
     """Riemannian CG/L-BFGS (``optimizer``) on the block for at most ``budget ≤ max_iters`` iterations, in one
     run (fixed ``P``) or in rounds of ``refresh`` iterations with an ``ActiveSetPreconditioner`` rebuilt
     before each round. ``max_iters`` is the compiled bound (the same for every call: one compilation).
 
+    ``progress(stiefel.Progress)`` and ``stop`` go to ``stiefel.minimize`` (``iteration`` counts this call's
+    iterations; the caller adds its offset).
+
     Returns ``(X, iterations, status, run seconds (incl. refreshes), compile seconds,
-    history {"time", "value", "monitor"})``; a round that ends converged ends the run.
+    history {"time", "value", "monitor"})``; a round that ends converged or interrupted ends the run.
     """
     if not isinstance(P, ActiveSetPreconditioner):
         res = stiefel.minimize(F, manifold, X, method=optimizer, preconditioner=P, gtol=gtol, ftol=ftol,
-                               ftol_window=ftol_window, max_iters=max_iters, budget=budget, monitor=F.true_value)
+                               ftol_window=ftol_window, max_iters=max_iters, budget=budget, monitor=F.true_value,
+                               progress=progress, stop=stop)
         h = res.trimmed_history()
         h["time"] = np.linspace(0.0, res.wall_time, len(h["value"]))
         return res.x, int(res.iterations), res.status_name, res.wall_time, res.compile_time, h
@@ -63,9 +67,10 @@ def _block_rounds(F, manifold, X, P, *, gtol: float, ftol: float, max_iters: int
         t0 = time.perf_counter()
         P.refresh(X)
         wall += time.perf_counter() - t0
+        shifted = None if progress is None else (lambda info, d=done: progress(info._replace(iteration=d + info.iteration)))
         res = stiefel.minimize(F, manifold, X, method=optimizer, preconditioner=P.apply, gtol=gtol, ftol=ftol,
                                ftol_window=ftol_window, max_iters=bound, budget=min(bound, budget - done),
-                               monitor=F.true_value, check=False)
+                               monitor=F.true_value, check=False, progress=shifted, stop=stop)
         h = res.trimmed_history()
         first = 0 if done == 0 else 1  # a later round's entry 0 repeats the previous round's last
         parts["time"].append(wall + np.linspace(0.0, res.wall_time, len(h["value"]))[first:])
@@ -79,6 +84,19 @@ def _block_rounds(F, manifold, X, P, *, gtol: float, ftol: float, max_iters: int
             status = res.status_name
             break
     return X, done, status, wall, compile_t, {key: np.concatenate(v) for key, v in parts.items()}
+
+
+def _staged(progress, offset: int, elapsed: float, stage: int, n_stages: int):
+    """``progress`` with a stage's reports shifted to the whole solve: iterations and seconds of the earlier
+    stages added, the stage and the number of stages set."""
+
+    def report(info):
+        if stage < n_stages - 1 and info.remaining == 0.0:  # the end of an intermediate stage is not the end
+            info = info._replace(remaining=None)
+        progress(info._replace(iteration=offset + info.iteration, elapsed=elapsed + info.elapsed, stage=stage,
+                               n_stages=n_stages, method="block"))
+
+    return report
 
 
 def _shifted_inverse(W, a, sigma: float, dtype):
@@ -175,10 +193,16 @@ class BlockCMM(_SmoothedSolver):
                  f"unknown preconditioner {self.preconditioner!r}; choose one of {PRECONDITIONERS}")
         _check_int("refresh", self.refresh, 1)
 
-    def solve(self, W, a, k, mu, start, *, weighting="area", seed=0, dtype=None, callback=None) -> SolverRun:
+    supports_progress: ClassVar[bool] = True
+
+    def solve(self, W, a, k, mu, start, *, weighting="area", seed=0, dtype=None, callback=None, progress=None,
+              stop=None) -> SolverRun:
         """Continuation over the smoothing stages, warm-started; history ``time``, ``smoothed_objective``
-        and ``objective`` (true), one entry per iterate."""
+        and ``objective`` (true), one entry per iterate. ``progress(stiefel.Progress)`` between compiled
+        chunks (iterations over all stages, the stage), ``stop`` checked between them: an interrupted stage
+        ends the solve (status ``interrupted``, the current iterate)."""
         _no_callback(self, callback)
+        stop_signal = stop
         sigma, dt, energy, schedule, (ratio_e, ratio_d) = self._setup(W, a, mu, start, weighting, dtype)
         P, t_factor = _shifted_inverse(W, a, sigma, dt) if self.preconditioner == "shifted" else (None, 0.0)
         manifold = stiefel.GeneralizedStiefel(a, k, retraction="cholesky", dtype=dtype)
@@ -199,9 +223,11 @@ class BlockCMM(_SmoothedSolver):
                 if active is None:
                     active = ActiveSetPreconditioner(W, a, sigma, mu, l1_weights_np(a, weighting), s)
                 active.set_width(s)
+            report = None if progress is None else _staged(progress, iters, wall, stage, len(schedule))
             X, it_stage, st, t_run, t_compile, h = _block_rounds(
                 F, manifold, X, P if P is not None else active, gtol=self.gtol, max_iters=self.max_iters,
-                budget=self.max_iters - iters, refresh=self.refresh, optimizer=self.optimizer, **stop)
+                budget=self.max_iters - iters, refresh=self.refresh, optimizer=self.optimizer, progress=report,
+                stop=stop_signal, **stop)
             iters += it_stage
             first = 0 if stage == 0 else 1  # a later stage's entry 0 is the previous stage's last iterate
             true_values.extend(list(h["monitor"][first:]))
@@ -211,6 +237,8 @@ class BlockCMM(_SmoothedSolver):
             compile_t += t_compile
             if st != "converged":
                 status = st
+            if st == "interrupted":
+                break
         history = {"time": np.asarray(times), "smoothed_objective": np.asarray(values),
                    "objective": np.asarray(true_values)}
         Psi = orthonormalize(np.asarray(X, dtype=np.float64), a)  # exact A-orthonormality of the returned modes

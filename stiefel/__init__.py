@@ -13,7 +13,9 @@ Public API (MATH.md §1–3):
   jittable/vmappable function.
 * ``RiemannianImplicitAdjoint`` — derivatives of solutions by the implicit function theorem
   (MATH.md §9); ``riemannian_hessian``, ``hessian_operator`` — the Riemannian Hessian.
-* ``Result``, ``SequentialResult``, ``Status``, ``History`` — solver outcomes.
+* ``Result``, ``SequentialResult``, ``Status``, ``History`` — solver outcomes; ``Progress`` — what a
+  ``progress=`` callback receives between compiled chunks of iterations (``stiefel.driver``), and
+  ``CallbackError`` when that callback raises.
 * ``as_operator``, ``shifted_inverse`` — SPD operators and preconditioners.
 * ``stiefel.sharding`` — ``row_mesh``, ``shard_rows``, ``solve_sharded``: the block solver with
   ``X`` split by rows over devices (single- or multi-host).
@@ -32,6 +34,7 @@ sparsax) when the global x64 flag is on, and as host callbacks otherwise; the th
 
 from .block_solver import METHODS, BlockOptions, minimize, solver_for
 from .block_solver import solve as solve_block
+from .driver import CallbackError, Progress
 from .hessian import hessian_operator, riemannian_hessian
 from .implicit import RiemannianImplicitAdjoint, riemannian_residual, tangent_solve
 from .minimisers import RiemannianBB, RiemannianCG, RiemannianLBFGS

@@ -64,3 +64,15 @@ def run_compiled(fn, *args):
     out = jax.block_until_ready(out)
     t2 = time.perf_counter()
     return out, t1 - t0, t2 - t1
+
+
+def compile_aot(fn, *args):
+    """Trace, lower and compile ``fn(*args)`` once (arrays traced, the rest static, as in ``run_compiled``);
+    return a callable taking arguments of the same structure (new array values) that runs the executable."""
+    dynamic, static_args = eqx.partition(args, eqx.is_array)
+    compiled = _call.lower(dynamic, (fn, static_args)).compile()
+
+    def call(*new_args):
+        return compiled(eqx.partition(new_args, eqx.is_array)[0])
+
+    return call

@@ -21,7 +21,8 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from ._compile import is_traced, run_compiled
+from ._compile import is_traced
+from .driver import DEFAULT_INTERVAL, CallbackError, run_chunked
 from .errors import StiefelError
 from .implicit import RiemannianImplicitAdjoint
 from .manifold import GeneralizedStiefel
@@ -165,6 +166,9 @@ def minimize(
     args: Any = None,
     adjoint: optx.AbstractAdjoint | None = None,
     budget: int | None = None,
+    progress: Callable | None = None,
+    progress_interval: float = DEFAULT_INTERVAL,
+    stop: Any = None,
 ) -> Result:
     """Minimise ``F(X)`` over ``X ∈ S_M`` from ``X0`` (the whole block at once).
 
@@ -215,6 +219,13 @@ def minimize(
       budget: optional runtime limit ``0 ≤ budget ≤ max_iters`` (may be traced): warm-started stages
         sharing one total of iterations pass ``max_iters=total, budget=left`` and compile once; the
         status is ``max_iters`` when the budget ends the run.
+      progress: optional ``progress(stiefel.Progress)``, called between compiled chunks of about
+        ``progress_interval`` seconds (``stiefel.driver``: iteration, objective, gradient norm, elapsed
+        and estimated remaining time). If it raises, the solve stops and ``stiefel.CallbackError`` is
+        raised with the iterate reached in its ``result``.
+      stop: optional ``threading.Event`` (or a callable returning True) checked between chunks; when set,
+        the solve returns the current iterate with status ``interrupted`` — as it does on Ctrl-C
+        (``KeyboardInterrupt``) during the solve. Neither adds anything to the compiled loop.
 
     Every option is checked before any work (``ParameterError``, naming the option, its value and
     its range; ``RankDeficientError`` for a start with dependent columns).
@@ -231,6 +242,7 @@ def minimize(
     _check_options(SimpleNamespace(max_iters=max_iters, ls_max_evals=ls_max_evals, ftol_window=ftol_window,
                                    memory=memory, gtol=gtol, xtol=xtol, ftol=ftol, c1=c1, c2=c2, init_step=init_step,
                                    max_move=max_move, bb_gamma=bb_gamma))
+    check_positive("progress_interval", progress_interval)
     if budget is None:  # always a runtime limit: calls with and without one share a compilation
         budget = int(max_iters)
     check_count("budget", budget, 0, int(max_iters), high_label=f"max_iters = {max_iters}")
@@ -256,10 +268,17 @@ def minimize(
             bad = (status == Status.LINE_SEARCH_FAILED) | (status == Status.NON_FINITE)
             X = eqx.error_if(X, bad, "stiefel.minimize: the solver stopped with status line_search_failed or non_finite")
         return Result(x=X, value=value, grad_norm=gnorm, iterations=it, status=status, history=history, stats=stats)
-    out, t_compile, t_run = run_compiled(_run, fn, solver, X0, args, opts.max_iters, adjoint)
-    X, value, gnorm, it, status, history, stats = out
-    result = Result(x=X, value=value, grad_norm=gnorm, iterations=it, status=status, history=history,
-                    stats={k: np.asarray(v) for k, v in stats.items()}, wall_time=t_run, compile_time=t_compile)
+    state, dist, t_compile, t_run, error = run_chunked(solver, fn, X0, args, opts.max_iters, progress=progress,
+                                                       interval=float(progress_interval), stop=stop, method=method)
+    stats = {"n_fevals": state.n_fevals, "n_grads": state.it + 1, "n_restarts": state.n_restarts,
+             "dist_to_manifold": dist}
+    result = Result(x=state.X, value=state.F, grad_norm=state.gnorm, iterations=state.it, status=state.status,
+                    history=state.history, stats={k: np.asarray(v) for k, v in stats.items()}, wall_time=t_run,
+                    compile_time=t_compile)
+    if error is not None:
+        raise CallbackError(f"the progress callback raised {type(error).__name__}: {error}; the solve stopped "
+                            f"after {int(state.it)} iterations (the iterate is in this error's result)",
+                            result) from error
     if throw:
         result.raise_for_status()
     return result

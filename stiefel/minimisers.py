@@ -57,11 +57,13 @@ def _budget(x):
 
 
 def to_optx_result(status):
-    """``stiefel.Status`` code (traced or not) → ``optx.RESULTS`` item; −1 (running) → successful."""
+    """``stiefel.Status`` code (traced or not) → ``optx.RESULTS`` item; −1 (running) → successful;
+    ``INTERRUPTED`` (only set by the host loop of ``stiefel.driver``) → max steps reached."""
     R = optx.RESULTS
     return R.where(status == Status.NON_FINITE, R.nonfinite,
                    R.where(status == Status.LINE_SEARCH_FAILED, R.nonlinear_divergence,
-                           R.where(status == Status.MAX_ITERS, R.nonlinear_max_steps_reached, R.successful)))
+                           R.where((status == Status.MAX_ITERS) | (status == Status.INTERRUPTED),
+                                   R.nonlinear_max_steps_reached, R.successful)))
 
 
 class _RiemannianMinimiser(optx.AbstractMinimiser):

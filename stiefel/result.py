@@ -19,8 +19,9 @@ class Status:
     MAX_ITERS = 1  #: ran out of iterations
     LINE_SEARCH_FAILED = 2  #: no acceptable step along a descent direction
     NON_FINITE = 3  #: the objective or its gradient became non-finite (last finite iterate kept)
+    INTERRUPTED = 4  #: stopped from outside (``stop``, Ctrl-C, a raising ``progress`` callback); iterate kept
 
-    names = ("converged", "max_iters", "line_search_failed", "non_finite")
+    names = ("converged", "max_iters", "line_search_failed", "non_finite", "interrupted")
 
     @classmethod
     def name(cls, code) -> str:

@@ -24,7 +24,7 @@ def _assert_same(a, b, *, x_tol=1e-8):
     np.testing.assert_array_equal(a.iterations, b.iterations)
     np.testing.assert_array_equal(a.status, b.status)
     assert np.max(np.abs(a.modes - b.modes)) <= x_tol
-    np.testing.assert_allclose(a.value, b.value, rtol=1e-11)
+    np.testing.assert_allclose(a.value, b.value, rtol=1e-10)  # batched and single CHOLMOD calls round apart (2e-11)
     np.testing.assert_allclose(a.objective, b.objective, rtol=1e-10)
 
 

@@ -95,7 +95,10 @@ def test_modes_demo_mesh(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     assert summary["mesh"]["source"].startswith("demo:")
     for lib in ("python", "jax", "numpy", "scipy", "stiefel-cmm"):
         assert summary["versions"][lib]
-    assert summary["timings"]["solve_wall"] > 0
+    t = summary["timings"]
+    assert set(t) == {"compile_s", "solve_s", "setup_s", "write_s", "total_s"} and t["solve_s"] > 0
+    assert t["compile_s"] + t["solve_s"] + t["setup_s"] + t["write_s"] <= t["total_s"] * 1.001
+    assert summary["compilation_cache"] is None  # STIEFEL_CACHE_DIR=off (conftest)
     assert summary["solver_options"] == {"max_iters": 800, "smoothing": "f6", "gtol": 1e-5}
     # files by role, each with its size and SHA-256; exactly the files written (cli.run_dir)
     assert {role: rec["name"] for role, rec in summary["files"].items()} == {
@@ -267,3 +270,61 @@ def test_demo_mesh_is_deterministic_closed_surface() -> None:
     m = mesh.load((V, F))
     assert 1000 <= m.n_vertices <= 3000
     assert m.is_closed and m.n_components == 1 and m.euler_characteristic == 2
+
+
+def test_compilation_cache_options(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """--cache-dir is used and recorded; a directory that cannot be written is one warning line and the run
+    goes on without the cache; --no-cache records none."""
+    cache = tmp_path / "cache"
+    out = tmp_path / "a"
+    assert main(["eigs", "-k", "3", "--quiet", "--cache-dir", str(cache), "--out", str(out)]) == 0
+    assert json.loads((out / "summary.json").read_text())["compilation_cache"] == str(cache)
+    assert cache.is_dir()
+    blocker = tmp_path / "file"
+    blocker.write_text("not a directory")
+    capsys.readouterr()
+    assert main(["eigs", "-k", "3", "--quiet", "--cache-dir", str(blocker / "sub"), "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert err.count("warning: compilation cache") == 1 and "running without it" in err and "Traceback" not in err
+    assert json.loads((out / "summary.json").read_text())["compilation_cache"] is None
+    assert main(["eigs", "-k", "3", "--quiet", "--no-cache", "--cache-dir", str(cache), "--out", str(out)]) == 0
+    assert json.loads((out / "summary.json").read_text())["compilation_cache"] is None
+
+
+def test_ctrl_c_during_the_solve_writes_the_modes_reached(tmp_path: Path, capsys: pytest.CaptureFixture,
+                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    """SIGINT while the block solver runs: it stops at the next chunk, the modes reached are written with
+    status interrupted, one stderr line, exit code 130; the solver's progress goes to stderr."""
+    import os
+    import signal
+
+    import cli.progress
+
+    sent = []
+
+    class Interrupting(cli.progress.SolveProgress):
+        def __call__(self, info):
+            super().__call__(info)
+            if info.iteration >= 20 and not sent:
+                sent.append(info.iteration)
+                os.kill(os.getpid(), signal.SIGINT)
+
+    monkeypatch.setattr("cli.commands.SolveProgress", Interrupting)
+    out = tmp_path / "int"
+    code = main(["modes", "-k", "3", "--mu", "0.01n", "--gtol", "1e-12", "--max-iters", "5000", "--no-png",
+                 "--out", str(out)])
+    captured = capsys.readouterr()
+    assert code == 130 and sent
+    assert "interrupted during the solve" in captured.err and "Traceback" not in captured.err
+    assert "it " in captured.err and "f = " in captured.err  # progress lines (stderr is not a terminal here)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["diagnostics"]["status"] == "interrupted" and summary["interrupted"]["signal"] == "SIGINT"
+    assert 20 <= summary["diagnostics"]["iterations"] < 5000
+    modes = np.load(out / "modes.npz")["modes"]
+    assert _a_orthonormality(modes, demo_mesh()) < 1e-10
+
+
+def test_quiet_prints_no_progress(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    assert main(["modes", "-k", "3", *FAST, "--no-png", "--quiet", "--out", str(tmp_path / "q")]) == 0
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err == ""
