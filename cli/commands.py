@@ -242,15 +242,18 @@ _PARTIAL_NOTE = ("modes are written when the solve finishes (only --method seque
                  "as they complete)")
 
 
-def _solver(args: argparse.Namespace, method: str, smoothing: str, *, local_functions: Any = None
-            ) -> tuple[Any, dict]:
+def _solver(args: argparse.Namespace, method: str, smoothing: str, *, local_functions: Any = None,
+            runtime_smoothing: bool = False) -> tuple[Any, dict]:
     """``(solver, options passed)``: the ``objectives.cmm_solvers`` object for ``--method``. Every solver
-    gets ``--max-iters``; the manifold solvers also ``--smoothing`` and ``--gtol``; fast its ``U``."""
+    gets ``--max-iters``; the manifold solvers also ``--smoothing`` and ``--gtol`` (and, for
+    ``compare-smoothings``, ``runtime_smoothing``: one compilation for all smoothings); fast its ``U``."""
     from objectives.cmm_solvers import SOLVERS, FastCMM
 
     passed: dict[str, Any] = {"max_iters": args.max_iters}
     if method in ("block", "sequential"):
         passed.update(smoothing=smoothing, gtol=GTOL if args.gtol is None else args.gtol)
+        if runtime_smoothing:
+            passed["runtime_smoothing"] = True
         return SOLVERS[method](**passed), passed
     if args.gtol is not None:
         stderr_line(f"{PROG}: warning: --gtol applies to the block and sequential solvers; {method} stops on its "
@@ -335,7 +338,7 @@ def cmd_compare(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDi
         t = time.perf_counter()
         bar = SolveProgress(quiet=args.quiet, label=name)
         try:
-            solver, passed = _solver(args, args.method, name)
+            solver, passed = _solver(args, args.method, name, runtime_smoothing=True)
             r = compressed_modes(lap, args.k, mu, solver=solver, weighting=args.weighting, seed=args.seed,
                                  start="eigen", progress=bar)
             row.update(status=r.status, objective=r.objective, dirichlet=r.dirichlet, l1=r.l1,

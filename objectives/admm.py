@@ -32,6 +32,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from stiefel.sparse_factor import SymmetricFactor
+from stiefel.driver import HostMonitor
 from stiefel.validation import check_count, check_nonnegative, check_number, check_positive
 
 __all__ = ["ADMMOptions", "ADMMResult", "admm", "admm_sequential", "l1_weights_np", "RhoRule", "soft_threshold"]
@@ -210,7 +211,8 @@ def _polar(B):
 
 
 def admm(W, area_diag, k: int, mu: float, *, weighting: str = "area", Psi0=None, seed: int = 0,
-         options: ADMMOptions = ADMMOptions(), target: float | None = None) -> ADMMResult:
+         options: ADMMOptions = ADMMOptions(), target: float | None = None,
+         monitor: HostMonitor | None = None) -> ADMMResult:
     """ADMM for CMMs (Algorithm 3).
 
     Args:
@@ -221,6 +223,8 @@ def admm(W, area_diag, k: int, mu: float, *, weighting: str = "area", Psi0=None,
       Psi0: start ``(n, k)`` (A-orthonormalised here); default: random (``seed``).
       options: ``ADMMOptions``.
       target: optional objective value; the run stops once the true objective is ≤ target.
+      monitor: optional ``stiefel.driver.HostMonitor`` (progress with the primal residual, stop checks); a
+        stop or Ctrl-C (``KeyboardInterrupt``) ends the run with status ``"interrupted"`` and the current Ψ.
     """
     W = sp.csr_matrix(W, dtype=np.float64)
     a = np.asarray(area_diag, dtype=np.float64)
@@ -247,38 +251,44 @@ def admm(W, area_diag, k: int, mu: float, *, weighting: str = "area", Psi0=None,
     t0 = time.perf_counter()
     hist = _History(t0)
     it = 0
-    for it in range(1, options.max_iters + 1):
-        Y = 0.5 * (E - UE + S - US)
-        if exact:
-            Psi = _polar(sqrt_d * Y) / sqrt_d
-        else:
-            Psi = _polar(Y) / np.sqrt(r_scale)
-        E_old, S_old = E, S
-        E = estep.solve(rho, rho * (d[:, None] * (Psi + UE)))
-        V = Psi + US
-        S = soft_threshold(V, mu * thresh_w[:, None] / rho)
-        UE += Psi - E
-        US += Psi - S
-        # residuals in the penalty norm
-        primal = np.sqrt(np.sum(d[:, None] * ((Psi - E) ** 2 + (Psi - S) ** 2)))
-        dual = rho * np.sqrt(np.sum(d[:, None] * (E - E_old + S - S_old) ** 2))
-        Psi_feasible = Psi if exact else orthonormalize(Psi, a)
-        obj = _true_objective(W, w, mu, Psi_feasible)
-        elapsed = hist.record(objective=obj, primal=primal, dual=dual, rho=rho)
-        scale_p = np.sqrt(2 * n * k) * options.eps_abs
-        eps_pri = scale_p + options.eps_rel * max(np.sqrt(np.sum(d[:, None] * Psi**2)) * np.sqrt(2),
-                                                  np.sqrt(np.sum(d[:, None] * (E**2 + S**2))))
-        eps_dual = np.sqrt(n * k) * options.eps_abs + options.eps_rel * rho * np.sqrt(np.sum(d[:, None] * (UE + US) ** 2))
-        if primal <= eps_pri and dual <= eps_dual:
-            status = "converged"
-            break
-        if target is not None and obj <= target:
-            status = "target"
-            break
-        if elapsed > options.time_limit:
-            status = "time_limit"
-            break
-        rho = rule.apply(it, primal, dual, rho, UE, US)
+    try:
+        for it in range(1, options.max_iters + 1):
+            Y = 0.5 * (E - UE + S - US)
+            if exact:
+                Psi = _polar(sqrt_d * Y) / sqrt_d
+            else:
+                Psi = _polar(Y) / np.sqrt(r_scale)
+            E_old, S_old = E, S
+            E = estep.solve(rho, rho * (d[:, None] * (Psi + UE)))
+            V = Psi + US
+            S = soft_threshold(V, mu * thresh_w[:, None] / rho)
+            UE += Psi - E
+            US += Psi - S
+            # residuals in the penalty norm
+            primal = np.sqrt(np.sum(d[:, None] * ((Psi - E) ** 2 + (Psi - S) ** 2)))
+            dual = rho * np.sqrt(np.sum(d[:, None] * (E - E_old + S - S_old) ** 2))
+            Psi_feasible = Psi if exact else orthonormalize(Psi, a)
+            obj = _true_objective(W, w, mu, Psi_feasible)
+            elapsed = hist.record(objective=obj, primal=primal, dual=dual, rho=rho)
+            scale_p = np.sqrt(2 * n * k) * options.eps_abs
+            eps_pri = scale_p + options.eps_rel * max(np.sqrt(np.sum(d[:, None] * Psi**2)) * np.sqrt(2),
+                                                      np.sqrt(np.sum(d[:, None] * (E**2 + S**2))))
+            eps_dual = np.sqrt(n * k) * options.eps_abs + options.eps_rel * rho * np.sqrt(np.sum(d[:, None] * (UE + US) ** 2))
+            if primal <= eps_pri and dual <= eps_dual:
+                status = "converged"
+                break
+            if target is not None and obj <= target:
+                status = "target"
+                break
+            if elapsed > options.time_limit:
+                status = "time_limit"
+                break
+            if monitor is not None and monitor.tick(it, obj, primal, error_result=Psi):
+                status = "interrupted"
+                break
+            rho = rule.apply(it, primal, dual, rho, UE, US)
+    except KeyboardInterrupt:  # Ctrl-C: the current iterate, status interrupted
+        status = "interrupted"
     wall = time.perf_counter() - t0
     Psi_out = orthonormalize(Psi, a)
     return ADMMResult(
@@ -289,14 +299,15 @@ def admm(W, area_diag, k: int, mu: float, *, weighting: str = "area", Psi0=None,
 
 
 def admm_sequential(W, area_diag, k: int, mu: float, *, weighting: str = "area", Psi0=None, seed: int = 0,
-                    options: ADMMOptions = ADMMOptions()) -> ADMMResult:
+                    options: ADMMOptions = ADMMOptions(), monitor: HostMonitor | None = None) -> ADMMResult:
     """Sequential ADMM (§3.2.2, end): one mode at a time with ``ψᵀAΨ_prev = 0``.
 
     The Ψ-step for one column is the A-closest unit vector A-orthogonal to the previous
     modes: ``ψ = normalise_A((I − ΦΦᵀA) y)``. ``options.max_iters`` is the total over all modes, shared
     fairly: mode j may use ⌈left / (k − j)⌉ of the iterations modes 0 … j−1 left (what a mode leaves
     rolls over); a mode stopped by its share ends with status ``"max_iters"``, and one that gets no
-    iteration is its projected start.
+    iteration is its projected start. ``monitor``: as in ``admm``; after a stop or Ctrl-C the modes not
+    reached are their projected starts (status ``"interrupted"``).
     """
     W = sp.csr_matrix(W, dtype=np.float64)
     a = np.asarray(area_diag, dtype=np.float64)
@@ -313,42 +324,54 @@ def admm_sequential(W, area_diag, k: int, mu: float, *, weighting: str = "area",
     hist = _History(t0)
     total_it = 0
     status = "converged"
-    for j in range(k):
-        y0 = np.asarray(Psi0[:, j]) if Psi0 is not None else rng.standard_normal(n)
+    try:
+        for j in range(k):
+            y0 = np.asarray(Psi0[:, j]) if Psi0 is not None else rng.standard_normal(n)
 
-        def project(y):
-            z = y - Phi @ (Phi.T @ (a * y))
-            return z / np.sqrt(np.sum(a * z * z))
+            def project(y):
+                z = y - Phi @ (Phi.T @ (a * y))
+                return z / np.sqrt(np.sum(a * z * z))
 
-        psi = project(y0)
-        e, s = psi.copy(), psi.copy()
-        ue, us = np.zeros(n), np.zeros(n)
-        rho = float(options.rho if options.rho is not None else max(mu, 1.0))
-        col_status = "max_iters"
-        rule = RhoRule(options)
-        it = 0
-        share = -(-(options.max_iters - total_it) // (k - j))  # ⌈left / modes to go⌉
-        for it in range(1, share + 1):
-            psi = project(0.5 * (e - ue + s - us))
-            e_old, s_old = e, s
-            e = estep.solve(rho, rho * a * (psi + ue))
-            v = psi + us
-            s = soft_threshold(v, mu * w / (a * rho))
-            ue += psi - e
-            us += psi - s
-            primal = np.sqrt(np.sum(a * ((psi - e) ** 2 + (psi - s) ** 2)))
-            dual = rho * np.sqrt(np.sum(a * (e - e_old + s - s_old) ** 2))
-            eps_pri = np.sqrt(2 * n) * options.eps_abs + options.eps_rel * np.sqrt(2.0)
-            eps_dual = np.sqrt(n) * options.eps_abs + options.eps_rel * rho * np.sqrt(np.sum(a * (ue + us) ** 2))
-            if primal <= eps_pri and dual <= eps_dual:
-                col_status = "converged"
+            psi = project(y0)
+            e, s = psi.copy(), psi.copy()
+            ue, us = np.zeros(n), np.zeros(n)
+            rho = float(options.rho if options.rho is not None else max(mu, 1.0))
+            col_status = "max_iters"
+            rule = RhoRule(options)
+            it = 0
+            share = -(-(options.max_iters - total_it) // (k - j))  # ⌈left / modes to go⌉
+            for it in range(1, share + 1):
+                psi = project(0.5 * (e - ue + s - us))
+                e_old, s_old = e, s
+                e = estep.solve(rho, rho * a * (psi + ue))
+                v = psi + us
+                s = soft_threshold(v, mu * w / (a * rho))
+                ue += psi - e
+                us += psi - s
+                primal = np.sqrt(np.sum(a * ((psi - e) ** 2 + (psi - s) ** 2)))
+                dual = rho * np.sqrt(np.sum(a * (e - e_old + s - s_old) ** 2))
+                eps_pri = np.sqrt(2 * n) * options.eps_abs + options.eps_rel * np.sqrt(2.0)
+                eps_dual = np.sqrt(n) * options.eps_abs + options.eps_rel * rho * np.sqrt(np.sum(a * (ue + us) ** 2))
+                if primal <= eps_pri and dual <= eps_dual:
+                    col_status = "converged"
+                    break
+                if monitor is not None and monitor.tick(total_it + it, float("nan"), primal, error_result=Phi):
+                    col_status = "interrupted"
+                    break
+                rho = rule.apply(it, primal, dual, rho, ue, us)
+            total_it += it
+            if col_status != "converged":
+                status = col_status
+            Phi = np.concatenate([Phi, psi[:, None]], axis=1)
+            hist.record(objective=_true_objective(W, w, mu, Phi))
+            if col_status == "interrupted":
                 break
-            rho = rule.apply(it, primal, dual, rho, ue, us)
-        total_it += it
-        if col_status != "converged":
-            status = col_status
-        Phi = np.concatenate([Phi, psi[:, None]], axis=1)
-        hist.record(objective=_true_objective(W, w, mu, Phi))
+    except KeyboardInterrupt:  # Ctrl-C: the current iterate, status interrupted
+        status = "interrupted"
+    for j in range(Phi.shape[1], k):  # interrupted: the modes not reached are their projected starts
+        y = np.asarray(Psi0[:, j]) if Psi0 is not None else rng.standard_normal(n)
+        z = y - Phi @ (Phi.T @ (a * y))
+        Phi = np.concatenate([Phi, (z / np.sqrt(np.sum(a * z * z)))[:, None]], axis=1)
     Psi_out = orthonormalize(Phi, a)
     return ADMMResult(
         Psi=Psi_out, objective=_true_objective(W, w, mu, Psi_out), iterations=total_it, status=status,

@@ -9,6 +9,8 @@ from typing import Any, ClassVar
 
 import scipy.sparse as sp
 
+from stiefel.driver import HostMonitor
+
 from .admm import ADMMOptions, ADMMResult, admm, admm_sequential
 from .cmm_base import CMMSolver, SolverRun, _check_int, _check_number, _is_number, _no_callback, _require
 from .fast import restricted_admm, restricted_eigenbasis
@@ -25,6 +27,14 @@ def _solver_run(res: ADMMResult, opts: ADMMOptions, mu: float) -> SolverRun:
     return SolverRun(res.Psi, res.iterations, res.status, res.wall_time, 0.0, history, {"rho0": rho0})
 
 
+def _finish(res: ADMMResult, opts: ADMMOptions, mu: float, monitor: HostMonitor | None) -> SolverRun:
+    """The last progress report (whatever the time since the previous one), then the ``SolverRun``."""
+    if monitor is not None:
+        primal = res.history.get("primal", [])
+        monitor.tick(res.iterations, res.objective, float(primal[-1]) if len(primal) else float("nan"), final=True)
+    return _solver_run(res, opts, mu)
+
+
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class _ADMMSolver(CMMSolver):
     """``ADMMOptions`` (``objectives.admm``) without the variant: ``rho`` (None: 2λ_{k−1} from the
@@ -33,7 +43,11 @@ class _ADMMSolver(CMMSolver):
     one residual exceeds ``rho_ratio`` times the other, at most every ``adapt_every`` iterations;
     stopping ``eps_abs``, ``eps_rel``, ``time_limit`` (s) and ``max_iters``, the total number of ADMM
     iterations of the solve (an integer in ``[1, 2³¹ − 1]``; ``SequentialADMMCMM``'s modes share it
-    fairly). Host numpy/scipy, float64."""
+    fairly). Host numpy/scipy, float64. ``solve(..., progress=, stop=)``: reports (primal residual as
+    ``grad_norm``) a few times per second and stops cleanly (status ``"interrupted"``,
+    ``stiefel.driver.HostMonitor``)."""
+
+    supports_progress: ClassVar[bool] = True
 
     rho: float | None = None
     adapt_rho: bool | str = ADMMOptions.adapt_rho
@@ -68,10 +82,17 @@ class _ADMMSolver(CMMSolver):
             return 2.0 * float(evals[k - 1] if k > 1 else evals[1])
         return self.rho
 
-    def _run(self, run, W, a, k, mu, start, weighting, seed, callback) -> SolverRun:
+    def _monitor(self, progress, stop, opts: ADMMOptions) -> HostMonitor | None:
+        if progress is None and stop is None:
+            return None
+        return HostMonitor(progress, stop, max_iters=opts.max_iters, method=self.name, tol=opts.eps_abs)
+
+    def _run(self, run, W, a, k, mu, start, weighting, seed, callback, progress, stop) -> SolverRun:
         _no_callback(self, callback)
         opts = self.admm_options(self._rho(start.evals, k))
-        return _solver_run(run(W, a, k, mu, weighting=weighting, Psi0=start.X0, seed=seed, options=opts), opts, mu)
+        monitor = self._monitor(progress, stop, opts)
+        res = run(W, a, k, mu, weighting=weighting, Psi0=start.X0, seed=seed, options=opts, monitor=monitor)
+        return _finish(res, opts, mu, monitor)
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -86,9 +107,10 @@ class ADMMCMM(_ADMMSolver):
         super().__post_init__()
         _require(self.variant in VARIANTS, f"unknown ADMM variant {self.variant!r}; choose one of {VARIANTS}")
 
-    def solve(self, W, a, k, mu, start, *, weighting="area", seed=0, dtype=None, callback=None) -> SolverRun:
+    def solve(self, W, a, k, mu, start, *, weighting="area", seed=0, dtype=None, callback=None, progress=None,
+              stop=None) -> SolverRun:
         """History: true objective and seconds per iteration; ``info["rho0"]``."""
-        return self._run(admm, W, a, k, mu, start, weighting, seed, callback)
+        return self._run(admm, W, a, k, mu, start, weighting, seed, callback, progress, stop)
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -99,9 +121,10 @@ class SequentialADMMCMM(_ADMMSolver):
 
     name: ClassVar[str] = "admm_sequential"
 
-    def solve(self, W, a, k, mu, start, *, weighting="area", seed=0, dtype=None, callback=None) -> SolverRun:
+    def solve(self, W, a, k, mu, start, *, weighting="area", seed=0, dtype=None, callback=None, progress=None,
+              stop=None) -> SolverRun:
         """History: the true objective of the modes found so far, one entry per column."""
-        return self._run(admm_sequential, W, a, k, mu, start, weighting, seed, callback)
+        return self._run(admm_sequential, W, a, k, mu, start, weighting, seed, callback, progress, stop)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -144,7 +167,8 @@ class FastCMM(_ADMMSolver):
         out["local_functions"] = tuple(self.local_functions.shape)  # the shape, not the matrix
         return out
 
-    def solve(self, W, a, k, mu, start, *, weighting="area", seed=0, dtype=None, callback=None) -> SolverRun:
+    def solve(self, W, a, k, mu, start, *, weighting="area", seed=0, dtype=None, callback=None, progress=None,
+              stop=None) -> SolverRun:
         """History: true objective and seconds per iteration; ``info["rho0"]``."""
         _no_callback(self, callback)
         n = a.shape[0]
@@ -157,5 +181,7 @@ class FastCMM(_ADMMSolver):
             if rho is None:  # as for the full ADMM: ρ of the order of the modes' spectrum
                 rho = 2.0 * float(evals_r[k - 1] if k > 1 else evals_r[1])
         opts = self.admm_options(rho)
-        res = restricted_admm(W, a, self.local_functions, k, mu, weighting=weighting, X0=Xr, seed=seed, options=opts)
-        return _solver_run(res, opts, mu)
+        monitor = self._monitor(progress, stop, opts)
+        res = restricted_admm(W, a, self.local_functions, k, mu, weighting=weighting, X0=Xr, seed=seed, options=opts,
+                              monitor=monitor)
+        return _finish(res, opts, mu, monitor)

@@ -18,6 +18,7 @@ import numpy as np
 import scipy.sparse as sp
 
 import stiefel
+from stiefel.driver import Progress
 from stiefel.minimisers import STALL_WINDOW_MAX
 from stiefel.operators import SparseOperator
 
@@ -99,6 +100,26 @@ def _staged(progress, offset: int, elapsed: float, stage: int, n_stages: int):
     return report
 
 
+def _column_progress(callback, progress, k: int, max_iters: int):
+    """A ``minimize_sequential`` column callback that also reports ``stiefel.Progress`` (columns done so far)."""
+    if progress is None:
+        return callback
+    t0, done = time.perf_counter(), [0, 0]
+
+    def report(j, info):
+        if callback is not None:
+            callback(j, info)
+        done[0] += int(info["iterations"])
+        done[1] += 1
+        elapsed = time.perf_counter() - t0
+        left = elapsed / done[1] * (k - j - 1) if j + 1 < k else 0.0  # per column so far
+        progress(Progress(iteration=done[0], max_iters=max_iters, objective=float(info["value"]),
+                          grad_norm=float(info["grad_norm"]), elapsed=elapsed, remaining=left,
+                          stage=j, n_stages=k, method="sequential"))
+
+    return report
+
+
 def _shifted_inverse(W, a, sigma: float, dtype):
     """``(P, seconds)`` with ``P = (W + σA)⁻¹`` factored in ``dtype``; the seconds count as part of the run,
     as ADMM's E-step factorisations do."""
@@ -114,7 +135,11 @@ class _SmoothedSolver(CMMSolver):
     per-stage ``gtol``; ``max_iters``, the total number of iterations of the solve, shared by the stages
     in turn (each gets what the earlier ones left; once it is spent the remaining stages are skipped and
     the status is ``max_iters``), an integer in ``[1, 2³¹ − 1]``; σ of ``(W + σA)⁻¹`` (None: λ_{k−1}, the
-    largest of the first k eigenvalues, λ₁ for k ≤ 2 — the scale of the modes sought, ``bench/RESULTS.md``)."""
+    largest of the first k eigenvalues, λ₁ for k ≤ 2 — the scale of the modes sought, ``bench/RESULTS.md``);
+    ``runtime_smoothing``: the smoothing as a runtime value of the compiled solver (``lax.switch`` over the
+    ten, ``objectives.energies.CMMEnergy``), so solvers differing only in ``smoothing`` share one
+    compilation — for comparisons; measured on fandisk (k = 8–10): 2.0–2.5× the compile time of one
+    smoothing and 7–12 % more time per iteration, so it is off by default."""
 
     smoothing: str = "f6"
     eps: float = 1e-3
@@ -124,8 +149,11 @@ class _SmoothedSolver(CMMSolver):
     continuation: int = 1
     continuation_start: float = 1e-1
     preconditioner_shift: float | None = None
+    runtime_smoothing: bool = False
 
     def __post_init__(self) -> None:
+        _require(isinstance(self.runtime_smoothing, bool), f"runtime_smoothing must be True or False, got "
+                 f"{self.runtime_smoothing!r}")
         _require(_is_number(self.eps) and _is_number(self.delta),
                  f"eps and delta must be positive numbers, got {self.eps!r}, {self.delta!r}")
         try:
@@ -153,7 +181,8 @@ class _SmoothedSolver(CMMSolver):
         # every array of the problem in the computation dtype (float32 runs stay float32)
         dt = np.dtype(dtype or (jnp.float64 if jax.config.jax_enable_x64 else jnp.float32))
         energy = cmm_energy(SparseOperator.from_scipy(W, dtype=dt), jnp.asarray(a, dtype=dt), mu,
-                            smoothing=self.smoothing, eps=self.eps, delta=self.delta, weighting=weighting)
+                            smoothing=self.smoothing, eps=self.eps, delta=self.delta, weighting=weighting,
+                            runtime_smoothing=self.runtime_smoothing)
         low = min(self.eps, self.delta)
         schedule = _continuation(low, self.continuation, self.continuation_start)
         return sigma, dt, energy, schedule, (self.eps / low, self.delta / low)
@@ -254,10 +283,15 @@ class SequentialCMM(_SmoothedSolver):
 
     name: ClassVar[str] = "sequential"
     supports_callback: ClassVar[bool] = True
+    supports_progress: ClassVar[bool] = True
 
-    def solve(self, W, a, k, mu, start, *, weighting="area", seed=0, dtype=None, callback=None) -> SolverRun:
+    def solve(self, W, a, k, mu, start, *, weighting="area", seed=0, dtype=None, callback=None, progress=None,
+              stop=None) -> SolverRun:
         """``callback(j, info)`` after each finished column (``stiefel.minimize_sequential``'s), so a long run
-        can save its columns; history ``time`` and ``smoothed_objective``, one entry per stage."""
+        can save its columns; history ``time`` and ``smoothed_objective``, one entry per stage.
+        ``progress(stiefel.Progress)`` after each column (a column is one compiled solve: no reports
+        inside it, and ``stop`` is not checked — Ctrl-C ends the run without a result)."""
+        callback = _column_progress(callback, progress, k, self.max_iters)
         sigma, dt, energy, schedule, (ratio_e, ratio_d) = self._setup(W, a, mu, start, weighting, dtype)
         P, t_factor = _shifted_inverse(W, a, sigma, dt)
         X = jnp.asarray(start.X0, dtype=dt)

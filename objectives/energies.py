@@ -141,7 +141,11 @@ class CMMEnergy(eqx.Module):
     with ``w`` the weighting's row weights (``A_ii`` or ``1/n``) and ``s`` a
     Table 6.1 smoothing. An immutable pytree: ``mu``, ``eps``, ``delta`` and
     ``weights`` are leaves (a continuation in δ re-uses the compiled solver;
-    use ``with_params``), ``smoothing`` and ``weighting`` are static.
+    use ``with_params``), ``smoothing`` and ``weighting`` are static — unless the
+    energy was built with ``runtime_smoothing=True``: then ``choice`` (an int32 leaf, the
+    index in ``smoothings.NAMES``) selects the smoothing by ``lax.switch`` and
+    ``with_params(smoothing=...)`` changes it without recompiling (all ten smoothings of
+    a comparison share one compiled solver; ``smoothing`` is then ``"runtime"``).
 
     ``X`` may be ``(n, k)`` or a column ``(n,)``; ``F(X) == Σ_j F(X[:, j])``.
     """
@@ -153,9 +157,20 @@ class CMMEnergy(eqx.Module):
     delta: Float[Array, ""]
     smoothing: str = eqx.field(static=True, default="f3")
     weighting: str = eqx.field(static=True, default="area")
+    choice: Int[Array, ""] | None = None
+
+    @property
+    def smoothing_name(self) -> str:
+        """The canonical name of the smoothing in use (read from ``choice`` when it is a runtime value)."""
+        if self.choice is None:
+            return self.smoothing
+        return _smoothings.NAMES[int(self.choice)]
 
     def _s(self, X):
-        return _smoothings.info(self.smoothing).fn(X, self.eps, self.delta)
+        if self.choice is None:
+            return _smoothings.info(self.smoothing).fn(X, self.eps, self.delta)
+        branches = [_smoothings.info(name).fn for name in _smoothings.NAMES]
+        return jax.lax.switch(self.choice, branches, X, self.eps, self.delta)
 
     def dirichlet(self, X: Float[Array, "n *k"]) -> Float[Array, ""]:
         """``tr(XᵀWX)`` (gradient ``2WX`` by ``stiefel.operators.quadratic_form``'s rule)."""
@@ -214,9 +229,18 @@ class CMMEnergy(eqx.Module):
         """Def. 3.2.15 per column with this energy's W, weights and μ."""
         return _compressed_eigenvalues(self.W, self.weights, Psi, self.mu)
 
-    def with_params(self, *, mu=None, eps=None, delta=None) -> "CMMEnergy":
-        """A copy with new ``mu``/``eps``/``delta`` (same pytree structure, no recompilation)."""
+    def with_params(self, *, mu=None, eps=None, delta=None, smoothing: str | None = None) -> "CMMEnergy":
+        """A copy with new ``mu``/``eps``/``delta`` (same pytree structure, no recompilation) and, for an
+        energy built with ``runtime_smoothing=True``, a new ``smoothing`` (a name or alias)."""
         out = self
+        if smoothing is not None:
+            name = _smoothings.info(smoothing).name
+            if self.choice is None:
+                if name != self.smoothing:
+                    raise ValueError("this energy's smoothing is static (a compile-time constant); build it with "
+                                     "cmm_energy(..., runtime_smoothing=True) to change it by with_params")
+            else:
+                out = eqx.tree_at(lambda e: e.choice, out, jnp.asarray(_smoothings.NAMES.index(name), jnp.int32))
         for name, value in (("mu", mu), ("eps", eps), ("delta", delta)):
             if value is not None:
                 old = getattr(out, name)
@@ -233,6 +257,7 @@ def cmm_energy(
     eps: float = 1e-3,
     delta: float = 1e-3,
     weighting: Weighting = "area",
+    runtime_smoothing: bool = False,
 ) -> CMMEnergy:
     """Build the smoothed CMM energy ``tr(XᵀWX) + μ Σ_ij w_i s(X_ij)`` (MATH.md §4).
 
@@ -243,6 +268,8 @@ def cmm_energy(
       smoothing: Table 6.1 name or alias (default ``"f3"``).
       eps, delta: smoothing parameters (thesis default 1e-3).
       weighting: ``"area"`` (``w_i = A_ii``, the thesis) or ``"uniform"`` (``w_i = 1/n``).
+      runtime_smoothing: the smoothing as a runtime index (``CMMEnergy.choice``, a ``lax.switch`` over the
+        ten): one compiled solver serves every smoothing (``with_params(smoothing=...)``).
     """
     op = _as_matvec(W)
     w = l1_weights(area_diag, weighting)
@@ -255,8 +282,9 @@ def cmm_energy(
         mu=jnp.asarray(mu, dtype=dtype),
         eps=jnp.asarray(eps, dtype=dtype),
         delta=jnp.asarray(delta, dtype=dtype),
-        smoothing=canonical,
+        smoothing="runtime" if runtime_smoothing else canonical,
         weighting=weighting,
+        choice=jnp.asarray(_smoothings.NAMES.index(canonical), jnp.int32) if runtime_smoothing else None,
     )
 
 

@@ -87,13 +87,14 @@ def _a_orthonormal_maximiser(B, Abar_factor):
 
 
 def restricted_admm(W, area_diag, U, k: int, mu: float, *, weighting: str = "area", X0=None, seed: int = 0,
-                    options: ADMMOptions = ADMMOptions()) -> ADMMResult:
+                    options: ADMMOptions = ADMMOptions(), monitor=None) -> ADMMResult:
     """Algorithm 8: ADMM for CMMs restricted to ``span(U)``; returns lifted modes ``Ψ = UX``.
 
     The restricted matrices ``W̄ = UᵀWU`` and ``Ā = UᵀAU`` stay sparse (d × d): the X-step
     solves with ``Ā`` (factored once), the E-step with ``2W̄ + ρĀ`` (once per ρ), both by
     ``stiefel.sparse_factor.SymmetricFactor``; the per-iteration objective is
-    ``tr(XᵀW̄X) + μ Σ w_i|(UX)_ij|`` (``(UX)ᵀW(UX) = XᵀW̄X``).
+    ``tr(XᵀW̄X) + μ Σ w_i|(UX)_ij|`` (``(UX)ᵀW(UX) = XᵀW̄X``). ``monitor``: a ``stiefel.driver.HostMonitor``
+    (progress, stop checks); a stop or Ctrl-C ends the run with status ``"interrupted"`` and the current X.
     """
     W = sp.csr_array(W, dtype=np.float64)
     a = np.asarray(area_diag, dtype=np.float64)
@@ -127,29 +128,36 @@ def restricted_admm(W, area_diag, U, k: int, mu: float, *, weighting: str = "are
     t0 = time.perf_counter()
     hist = _History(t0)
     it = 0
-    for it in range(1, options.max_iters + 1):
-        X = _a_orthonormal_maximiser(Abar @ (E - UE) + Ut @ (a[:, None] * (S - US)), Abar_factor)
-        E_old, S_old = E, S
-        if rho not in factors:
-            factors[rho] = SymmetricFactor(2.0 * Wbar + rho * Abar)
-        E = factors[rho].solve(rho * (Abar @ (X + UE))).reshape(X.shape)
-        UX = U @ X
-        S = soft_threshold(UX + US, thresh / rho)
-        UE += X - E
-        US += UX - S
-        XE = X - E
-        primal = np.sqrt(np.sum(XE * (Abar @ XE)) + np.sum(a[:, None] * (UX - S) ** 2))
-        dE = E - E_old
-        dual = rho * np.sqrt(np.sum(dE * (Abar @ dE)) + np.sum(a[:, None] * (S - S_old) ** 2))
-        elapsed = hist.record(objective=objective(X, UX), primal=primal, dual=dual, rho=rho)
-        tol = np.sqrt(n * k) * options.eps_abs + options.eps_rel * np.sqrt(k)
-        if primal <= tol and dual <= tol + options.eps_rel * rho * np.sqrt(np.sum(a[:, None] * US**2)):
-            status = "converged"
-            break
-        if elapsed > options.time_limit:
-            status = "time_limit"
-            break
-        rho = rule.apply(it, primal, dual, rho, UE, US)
+    try:
+        for it in range(1, options.max_iters + 1):
+            X = _a_orthonormal_maximiser(Abar @ (E - UE) + Ut @ (a[:, None] * (S - US)), Abar_factor)
+            E_old, S_old = E, S
+            if rho not in factors:
+                factors[rho] = SymmetricFactor(2.0 * Wbar + rho * Abar)
+            E = factors[rho].solve(rho * (Abar @ (X + UE))).reshape(X.shape)
+            UX = U @ X
+            S = soft_threshold(UX + US, thresh / rho)
+            UE += X - E
+            US += UX - S
+            XE = X - E
+            primal = np.sqrt(np.sum(XE * (Abar @ XE)) + np.sum(a[:, None] * (UX - S) ** 2))
+            dE = E - E_old
+            dual = rho * np.sqrt(np.sum(dE * (Abar @ dE)) + np.sum(a[:, None] * (S - S_old) ** 2))
+            obj = objective(X, UX)
+            elapsed = hist.record(objective=obj, primal=primal, dual=dual, rho=rho)
+            tol = np.sqrt(n * k) * options.eps_abs + options.eps_rel * np.sqrt(k)
+            if primal <= tol and dual <= tol + options.eps_rel * rho * np.sqrt(np.sum(a[:, None] * US**2)):
+                status = "converged"
+                break
+            if elapsed > options.time_limit:
+                status = "time_limit"
+                break
+            if monitor is not None and monitor.tick(it, obj, primal, error_result=X):
+                status = "interrupted"
+                break
+            rho = rule.apply(it, primal, dual, rho, UE, US)
+    except KeyboardInterrupt:  # Ctrl-C: the current iterate, status interrupted
+        status = "interrupted"
     X = orthonormalize(X, Abar)
     Psi = U @ X
     return ADMMResult(

@@ -34,7 +34,7 @@ from ._compile import compile_aot
 from .errors import SolverError
 from .result import Status
 
-__all__ = ["Progress", "CallbackError", "run_chunked", "DEFAULT_INTERVAL"]
+__all__ = ["Progress", "CallbackError", "HostMonitor", "run_chunked", "DEFAULT_INTERVAL"]
 
 DEFAULT_INTERVAL = 0.25  # seconds per chunk: at most about four progress reports per second
 
@@ -190,3 +190,46 @@ def run_chunked(solver, fn, X0, args, max_iters: int, *, progress: Callable | No
     elif int(state.status) < 0:
         state = state._replace(status=jnp.asarray(Status.MAX_ITERS, jnp.int32))
     return state, dist, t_compile, time.perf_counter() - t_start, error
+
+
+class HostMonitor:
+    """Progress reports and stop checks for solvers that iterate on the host (ADMM, column loops).
+
+    ``tick(iteration, objective, residual)`` after each iteration: calls ``progress`` when ``interval``
+    seconds passed since the last report (and ``final=True`` always), and returns True when the loop
+    should stop (``stop`` set, or a ``KeyboardInterrupt`` raised by the callback). A callback that raises
+    anything else becomes ``CallbackError`` (``result`` is given by the caller, ``error_result``).
+    ``interrupted`` says whether the loop was stopped from outside.
+    """
+
+    def __init__(self, progress: Callable | None = None, stop=None, *, interval: float = DEFAULT_INTERVAL,
+                 max_iters: int = 0, method: str = "", tol: float = 0.0):
+        self.progress, self.stop, self.interval = progress, stop, interval
+        self.max_iters, self.method = max_iters, method
+        self.t0 = time.perf_counter()
+        self.last = float("-inf")
+        self.estimate = _Estimate(tol)
+        self.interrupted = False
+
+    def tick(self, iteration: int, objective: float, residual: float, *, final: bool = False,
+             error_result=None) -> bool:
+        if self.progress is not None:
+            now = time.perf_counter()
+            if final or now - self.last >= self.interval:
+                self.last = now
+                elapsed = now - self.t0
+                left = 0.0 if final else self.estimate(iteration, self.max_iters, residual, elapsed)
+                info = Progress(iteration=int(iteration), max_iters=int(self.max_iters), objective=float(objective),
+                                grad_norm=float(residual), elapsed=elapsed, remaining=left, method=self.method)
+                try:
+                    self.progress(info)
+                except KeyboardInterrupt:
+                    self.interrupted = True
+                    return True
+                except Exception as exc:  # noqa: BLE001 — a named error for the caller
+                    raise CallbackError(f"the progress callback raised {type(exc).__name__}: {exc}; the solve "
+                                        f"stopped after {int(iteration)} iterations", error_result) from exc
+        if not final and _stopped(self.stop):
+            self.interrupted = True
+            return True
+        return False

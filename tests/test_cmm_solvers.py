@@ -51,6 +51,7 @@ BAD_OPTIONS = [
     (lambda U: BlockCMM(preconditioner="ilu"), "unknown preconditioner 'ilu'"),
     (lambda U: BlockCMM(refresh=0), "refresh must be an integer ≥ 1"),
     (lambda U: SequentialCMM(preconditioner_shift=0.0), "preconditioner_shift must be None"),
+    (lambda U: BlockCMM(runtime_smoothing="yes"), "runtime_smoothing must be True or False"),
     (lambda U: ADMMCMM(variant="frobenius"), "unknown ADMM variant 'frobenius'"),
     (lambda U: ADMMCMM(rho=-1.0), "rho must be None"),
     (lambda U: SequentialADMMCMM(adapt_rho="sometimes"), "adapt_rho must be"),
@@ -74,9 +75,10 @@ def test_each_solver_rejects_bad_options_on_construction(demo, make, match):
 
 FIELDS = {
     BlockCMM: {"smoothing", "eps", "delta", "gtol", "ftol", "max_iters", "continuation", "continuation_start",
-               "stage_ftol", "stage_window", "optimizer", "preconditioner", "preconditioner_shift", "refresh"},
+               "stage_ftol", "stage_window", "optimizer", "preconditioner", "preconditioner_shift", "refresh",
+               "runtime_smoothing"},
     SequentialCMM: {"smoothing", "eps", "delta", "gtol", "max_iters", "continuation", "continuation_start",
-                    "preconditioner_shift"},
+                    "preconditioner_shift", "runtime_smoothing"},
     ADMMCMM: {"rho", "adapt_rho", "rho_ratio", "rho_tau", "adapt_every", "eps_abs", "eps_rel", "max_iters",
               "time_limit", "variant"},
     SequentialADMMCMM: {"rho", "adapt_rho", "rho_ratio", "rho_tau", "adapt_every", "eps_abs", "eps_rel",
@@ -207,3 +209,18 @@ def test_select_mu_passes_the_solver_through(demo):
     assert len(trials) == 2 and res.method == "admm" and res.params["max_iters"] == 60
     assert res.iterations <= 60 and mu in [t[0] for t in trials]
     assert isinstance(solver, CMMSolver)
+
+
+def test_runtime_smoothing_compiles_once_for_all_smoothings(demo):
+    """``runtime_smoothing=True``: a second smoothing reuses the compiled solver (in this process: no new
+    trace or compilation) and gives the same modes as that smoothing compiled on its own."""
+    lap, _ = demo
+    first = compressed_modes(lap, K, 0.01 * lap.n, solver=BlockCMM(smoothing="f3", runtime_smoothing=True,
+                                                                   max_iters=300))
+    second = compressed_modes(lap, K, 0.01 * lap.n, solver=BlockCMM(smoothing="f8", runtime_smoothing=True,
+                                                                    max_iters=300))
+    alone = compressed_modes(lap, K, 0.01 * lap.n, solver=BlockCMM(smoothing="f8", max_iters=300))
+    assert second.compile_time < 0.2 * first.compile_time, (first.compile_time, second.compile_time)
+    assert second.iterations == alone.iterations
+    assert abs(second.objective - alone.objective) <= 1e-9 * alone.objective
+    np.testing.assert_allclose(second.modes, alone.modes, atol=1e-8)

@@ -184,3 +184,54 @@ def test_persistent_cache_serves_the_solver_in_a_new_process(tmp_path):
         out.append(p.stdout.split())
     assert out[0] == ["converged", "0"]
     assert out[1][0] == "converged" and int(out[1][1]) >= 2
+
+
+@pytest.mark.parametrize("method", ["admm", "admm_sequential", "fast", "sequential"])
+def test_every_cmm_solver_reports_progress_and_admm_ones_stop(method):
+    """Progress reaches every CMM solver (ADMM ones a few times per second, the sequential one per column,
+    the last report at the end); the host-loop ADMM solvers also stop on ``stop`` with the iterate reached."""
+    import mesh
+    from cli.demo_mesh import demo_mesh
+    from objectives.cmm import compressed_modes
+    from objectives.cmm_solvers import ADMMCMM, FastCMM, SequentialADMMCMM, SequentialCMM
+
+    m = mesh.load(demo_mesh())
+    lap = mesh.laplacian(m)
+    make = {"admm": lambda: ADMMCMM(max_iters=300), "admm_sequential": lambda: SequentialADMMCMM(max_iters=300),
+            "fast": lambda: FastCMM(mesh.local_functions(m, n_samples=60).U, max_iters=300),
+            "sequential": lambda: SequentialCMM(max_iters=300)}[method]
+    reports = []
+    r = compressed_modes(lap, 3, 0.01 * lap.n, solver=make(), progress=reports.append)
+    assert reports and reports[-1].iteration == r.iterations and reports[-1].remaining == 0.0
+    assert all(p.method == method for p in reports)
+    if method == "sequential":
+        assert [p.stage for p in reports] == [0, 1, 2] and all(p.n_stages == 3 for p in reports)
+        return
+    stop = threading.Event()
+
+    r2 = compressed_modes(lap, 3, 0.01 * lap.n, solver=make(), progress=lambda info: stop.set(), stop=stop)
+    assert r2.status == "interrupted" and r2.iterations < min(r.iterations, 300) and r2.orthogonality <= 1e-10
+
+
+def test_host_monitor_rate_limit_and_errors():
+    from stiefel.driver import HostMonitor
+
+    calls = []
+    mon = HostMonitor(calls.append, max_iters=100, method="x", interval=3600.0)
+    assert not mon.tick(1, 5.0, 1e-2)  # the first report is due at once
+    assert not mon.tick(2, 4.0, 1e-3)  # the next one only after an hour
+    assert not mon.tick(3, 3.0, 1e-4, final=True)  # the last one always
+    assert [c.iteration for c in calls] == [1, 3] and calls[-1].remaining == 0.0
+
+    def boom(info):
+        raise OSError("disk full")
+
+    with pytest.raises(CallbackError, match="OSError: disk full") as err:
+        HostMonitor(boom, max_iters=10).tick(1, 1.0, 1.0, error_result="X")
+    assert err.value.result == "X"
+
+    def ctrl_c(info):
+        raise KeyboardInterrupt
+
+    mon = HostMonitor(ctrl_c, max_iters=10)
+    assert mon.tick(1, 1.0, 1.0) and mon.interrupted

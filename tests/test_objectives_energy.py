@@ -322,3 +322,40 @@ def test_cmm_line_matches_the_retraction_curve():
         np.testing.assert_allclose(f1, f0, rtol=1e-11)
         np.testing.assert_allclose(g1, g0, rtol=1e-9, atol=1e-11 * abs(float(f0)))
     assert F.line(stiefel.GeneralizedStiefel(a, k, retraction="polar"), X, eta) is None
+
+
+def test_runtime_smoothing_equals_each_static_smoothing():
+    """``runtime_smoothing=True``: the smoothing is a runtime index (lax.switch); value and gradient equal
+    those of the energy with that smoothing fixed, for all ten, and one jitted function serves them all."""
+    from objectives import smoothings
+
+    rng = np.random.default_rng(5)
+    Ws = random_spd(N, 2)
+    area = rng.uniform(0.2, 1.8, N) / N
+    X = jnp.asarray(rng.standard_normal((N, K)) * 0.01)  # near 0, where the smoothings differ most
+    dyn = E.cmm_energy(Ws, area, 3.0, smoothing="f6", eps=2e-3, delta=5e-3, runtime_smoothing=True)
+    assert dyn.smoothing == "runtime" and dyn.smoothing_name == "f6"
+    traces = []
+
+    @jax.jit
+    def value_and_grad(energy, X):
+        traces.append(1)
+        return jax.value_and_grad(energy)(X)
+
+    for name in smoothings.NAMES:
+        static = E.cmm_energy(Ws, area, 3.0, smoothing=name, eps=2e-3, delta=5e-3)
+        switched = dyn.with_params(smoothing=name)
+        assert switched.smoothing_name == name
+        v_ref, g_ref = jax.value_and_grad(static)(X)
+        v, g = value_and_grad(switched, X)
+        np.testing.assert_allclose(v, v_ref, rtol=1e-14)
+        np.testing.assert_allclose(g, g_ref, rtol=1e-12, atol=1e-15)
+    assert len(traces) == 1  # one trace (one compilation) for the ten smoothings
+    assert float(dyn.with_params(smoothing="huber")(X)) == pytest.approx(
+        float(E.cmm_energy(Ws, area, 3.0, smoothing=smoothings.info("huber").name, eps=2e-3, delta=5e-3)(X)), rel=1e-14)
+    static = E.cmm_energy(Ws, area, 3.0, smoothing="f6")
+    assert static.with_params(smoothing="f6") is static
+    with pytest.raises(ValueError, match="runtime_smoothing=True"):
+        static.with_params(smoothing="f3")
+    with pytest.raises(ValueError, match="unknown smoothing"):
+        dyn.with_params(smoothing="f11")
