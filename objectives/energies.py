@@ -31,6 +31,7 @@ import numpy as np
 import scipy.sparse as sp
 from jaxtyping import Array, ArrayLike, Float, Int
 
+from stiefel._compile import host_array
 from stiefel.operators import DenseOperator, DiagonalOperator, LinearOperator, SparseOperator, quadratic_form
 
 from . import smoothings as _smoothings
@@ -240,11 +241,11 @@ class CMMEnergy(eqx.Module):
                     raise ValueError("this energy's smoothing is static (a compile-time constant); build it with "
                                      "cmm_energy(..., runtime_smoothing=True) to change it by with_params")
             else:
-                out = eqx.tree_at(lambda e: e.choice, out, jnp.asarray(_smoothings.NAMES.index(name), jnp.int32))
+                out = eqx.tree_at(lambda e: e.choice, out, host_array(_smoothings.NAMES.index(name), np.int32))
         for name, value in (("mu", mu), ("eps", eps), ("delta", delta)):
             if value is not None:
                 old = getattr(out, name)
-                out = eqx.tree_at(lambda e, n=name: getattr(e, n), out, jnp.asarray(value, dtype=old.dtype))
+                out = eqx.tree_at(lambda e, n=name: getattr(e, n), out, host_array(value, old.dtype))
         return out
 
 
@@ -279,12 +280,12 @@ def cmm_energy(
     return CMMEnergy(
         W=op,
         weights=w,
-        mu=jnp.asarray(mu, dtype=dtype),
-        eps=jnp.asarray(eps, dtype=dtype),
-        delta=jnp.asarray(delta, dtype=dtype),
+        mu=host_array(mu, dtype),
+        eps=host_array(eps, dtype),
+        delta=host_array(delta, dtype),
         smoothing="runtime" if runtime_smoothing else canonical,
         weighting=weighting,
-        choice=jnp.asarray(_smoothings.NAMES.index(canonical), jnp.int32) if runtime_smoothing else None,
+        choice=host_array(_smoothings.NAMES.index(canonical), np.int32) if runtime_smoothing else None,
     )
 
 

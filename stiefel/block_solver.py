@@ -270,7 +270,7 @@ def minimize(
         return Result(x=X, value=value, grad_norm=gnorm, iterations=it, status=status, history=history, stats=stats)
     state, dist, t_compile, t_run, error = run_chunked(solver, fn, X0, args, opts.max_iters, progress=progress,
                                                        interval=float(progress_interval), stop=stop, method=method)
-    stats = {"n_fevals": state.n_fevals, "n_grads": state.it + 1, "n_restarts": state.n_restarts,
+    stats = {"n_fevals": state.n_fevals, "n_grads": np.asarray(state.it) + 1, "n_restarts": state.n_restarts,
              "dist_to_manifold": dist}
     result = Result(x=state.X, value=state.F, grad_norm=state.gnorm, iterations=state.it, status=state.status,
                     history=state.history, stats={k: np.asarray(v) for k, v in stats.items()}, wall_time=t_run,

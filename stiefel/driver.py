@@ -30,7 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import block_steps as _steps
-from ._compile import compile_aot
+from ._compile import compile_aot, host_array
 from .errors import SolverError
 from .result import Status
 
@@ -143,7 +143,7 @@ def run_chunked(solver, fn, X0, args, max_iters: int, *, progress: Callable | No
     t0 = time.perf_counter()
     init = compile_aot(_init, solver, fn, X0, args)
     state = init(solver, fn, X0, args)
-    advance = compile_aot(_advance, solver, fn, args, state, jnp.asarray(0, jnp.int32))
+    advance = compile_aot(_advance, solver, fn, args, state, host_array(0, np.int32))
     t_compile = time.perf_counter() - t0
     estimate = _Estimate(float(np.asarray(solver.atol)))
     t_start = time.perf_counter()
@@ -156,7 +156,7 @@ def run_chunked(solver, fn, X0, args, max_iters: int, *, progress: Callable | No
                 interrupted = True
                 break
             t_chunk = time.perf_counter()
-            new_state, new_dist = advance(solver, fn, args, state, jnp.asarray(min(it + chunk, max_iters), jnp.int32))
+            new_state, new_dist = advance(solver, fn, args, state, host_array(min(it + chunk, max_iters), np.int32))
             new_state, new_dist = jax.block_until_ready((new_state, new_dist))
             state, dist = new_state, new_dist
         except KeyboardInterrupt:
@@ -186,9 +186,9 @@ def run_chunked(solver, fn, X0, args, max_iters: int, *, progress: Callable | No
     if dist is None:  # stopped before the first chunk
         dist = solver.manifold.dist_to_manifold(state.X)
     if interrupted:
-        state = state._replace(status=jnp.asarray(Status.INTERRUPTED, jnp.int32))
+        state = state._replace(status=host_array(Status.INTERRUPTED, np.int32))
     elif int(state.status) < 0:
-        state = state._replace(status=jnp.asarray(Status.MAX_ITERS, jnp.int32))
+        state = state._replace(status=host_array(Status.MAX_ITERS, np.int32))
     return state, dist, t_compile, time.perf_counter() - t_start, error
 
 

@@ -32,6 +32,7 @@ import numpy as np
 import scipy.sparse as sp
 from jaxtyping import Array, Float, Int
 
+from ._compile import host_array
 from .errors import NotSPDError
 
 __all__ = ["CholeskyArrays", "available", "MODE_ENV"]
@@ -87,11 +88,11 @@ class CholeskyArrays(eqx.Module):
         loop does not factor again."""
         up = sp.triu(sp.csr_array(S, dtype=np.float64)).tocoo()
         n = int(S.shape[0])
-        out = cls(rows=jnp.asarray(up.row, jnp.int32), cols=jnp.asarray(up.col, jnp.int32),
-                  vals=jnp.asarray(up.data, jnp.float64), n=n)
+        out = cls(rows=host_array(up.row, np.int32), cols=host_array(up.col, np.int32),
+                  vals=host_array(up.data, np.float64), n=n)
         if check:
             try:
-                jax.block_until_ready(_probe(out.rows, out.cols, out.vals, jnp.zeros((n,), jnp.float64)))
+                jax.block_until_ready(_probe(out.rows, out.cols, out.vals, np.zeros((n,), np.float64)))
             except Exception as exc:  # jax.errors.JaxRuntimeError: "matrix is not positive definite"
                 if "positive definite" not in str(exc):
                     raise

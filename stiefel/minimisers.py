@@ -30,10 +30,11 @@ from typing import Any, Callable, ClassVar
 
 import equinox as eqx
 import jax
-import jax.numpy as jnp
+import numpy as np
 import optimistix as optx
 
 from . import block_steps as _steps
+from ._compile import host_array
 from .block_steps import State
 from .errors import StiefelError
 from .manifold import GeneralizedStiefel
@@ -48,12 +49,12 @@ STALL_WINDOW_MAX = 64  # ring buffer of recent objective values for the ftol tes
 
 
 def _scalar(x):
-    return x if isinstance(x, jax.Array) and x.ndim == 0 else jnp.asarray(x)
+    return x if isinstance(x, jax.Array) and x.ndim == 0 else host_array(x)
 
 
 def _budget(x):
     """The runtime iteration limit as an int32 array (checked first: ``True`` or ``2.5`` is no count)."""
-    return None if x is None else jnp.asarray(check_count("budget", x, 0), jnp.int32)
+    return None if x is None else host_array(check_count("budget", x, 0), np.int32)
 
 
 def to_optx_result(status):

@@ -37,6 +37,7 @@ from jax.custom_derivatives import SymbolicZero
 from jaxtyping import Array, Float, Int
 
 from . import ffi_solve
+from ._compile import host_array
 from .errors import NotSPDError, ShapeError
 from .sparse_factor import SymmetricFactor
 from .validation import check_finite
@@ -222,9 +223,9 @@ class SparseOperator(LinearOperator):
             chol = ffi_solve.CholeskyArrays.from_scipy(csr)
         elif factor:
             host = _HostFactor(SymmetricFactor(csr), dtype, _fingerprint(csr))
-        return cls(
-            cols=jnp.asarray(cols, dtype=jnp.int32),
-            vals=jnp.asarray(vals, dtype=dtype),
+        return cls(  # converted on the host: a dtype conversion on the device would compile a program
+            cols=host_array(cols, np.int32),
+            vals=host_array(vals, dtype),
             chol=chol,
             factor=host,
             csr=_Frozen(csr),
@@ -328,7 +329,7 @@ def as_operator(M, *, check: bool = True, factor: bool = True, dtype=None) -> Li
             if np.any(arr <= 0):
                 i = int(np.argmin(arr))
                 raise NotSPDError(f"diagonal M must be positive: M[{i}] = {arr[i]:.3e}")
-        return DiagonalOperator(jnp.asarray(arr, dtype=dtype))
+        return DiagonalOperator(host_array(arr, dtype))
     if arr.ndim == 2:
         if arr.shape[0] != arr.shape[1]:
             raise ShapeError(f"M must be square, got shape {arr.shape}")
