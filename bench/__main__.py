@@ -29,6 +29,7 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
     "precision": ("bench.bench_precision", "float32 vs float64 (issue 7, precision)"),
     "autodiff": ("bench.bench_autodiff", "implicit derivatives through CMM solves: backward vs forward (issue 16)"),
     "penalty": ("bench.bench_penalty", "penalty baseline (jaxopt L-BFGS + projection) vs the manifold solvers"),
+    "first-run": ("bench.first_run", "whole stiefel processes: cold/warm cache, size buckets, progress (issue 17)"),
     "reliability": ("bench.reliability", "issue 19's fault catalogue: bad input, faults, loads -> docs/RELIABILITY.md"),
 }
 

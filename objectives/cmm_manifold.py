@@ -12,6 +12,7 @@ import math
 import time
 from typing import ClassVar
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -19,6 +20,7 @@ import scipy.sparse as sp
 
 import stiefel
 from stiefel._compile import host_array
+from stiefel.buckets import DEFAULT_GROWTH, check_growth
 from stiefel.driver import Progress
 from stiefel.minimisers import STALL_WINDOW_MAX
 from stiefel.operators import SparseOperator
@@ -27,6 +29,7 @@ from . import smoothings
 from .active_set import ActiveSetPreconditioner
 from .admm import l1_weights_np, orthonormalize
 from .energies import cmm_energy
+from .padding import PaddedProblem
 from .cmm_base import (CMMSolver, SolverOptionError, SolverRun, Start, _check_int, _check_number, _is_number,
                        _no_callback, _require)
 
@@ -121,11 +124,16 @@ def _column_progress(callback, progress, k: int, max_iters: int):
     return report
 
 
-def _shifted_inverse(W, a, sigma: float, dtype):
-    """``(P, seconds)`` with ``P = (W + σA)⁻¹`` factored in ``dtype``; the seconds count as part of the run,
-    as ADMM's E-step factorisations do."""
+def _shifted_inverse(W, a, sigma: float, dtype, padded: PaddedProblem | None = None):
+    """``(P, seconds)`` with ``P = (W + σA)⁻¹`` factored in ``dtype`` (of the padded problem, with its
+    bucketed shapes, when ``padded`` is given); the seconds count as part of the run, as ADMM's E-step
+    factorisations do."""
     t0 = time.perf_counter()
-    P = stiefel.as_operator(W + sp.diags_array(sigma * a), dtype=dtype)
+    if padded is None:
+        P = stiefel.as_operator(W + sp.diags_array(sigma * a), dtype=dtype)
+    else:
+        P = SparseOperator.from_scipy(padded.W + sp.diags_array(sigma * padded.a), factor=True, dtype=dtype,
+                                      width=padded.width, factor_size=padded.factor_size)
     return P, time.perf_counter() - t0
 
 
@@ -172,8 +180,9 @@ class _SmoothedSolver(CMMSolver):
     def needs_eigenpairs(self, start: str) -> bool:
         return start == "eigen" or self.preconditioner_shift is None
 
-    def _setup(self, W, a, mu: float, start: Start, weighting: str, dtype):
-        """``(σ, computation dtype, energy, stage widths, (ε/min, δ/min))``."""
+    def _setup(self, W, a, mu: float, start: Start, weighting: str, dtype, padded: PaddedProblem | None = None):
+        """``(σ, computation dtype, energy, stage widths, (ε/min, δ/min))``; the energy of the padded
+        problem (ℓ1 weights 0 on the padded rows) when ``padded`` is given."""
         sigma = self.preconditioner_shift
         if sigma is None:
             _require(start.evals is not None, f"{type(self).__name__} needs the first max(k, 2) eigenvalues in "
@@ -181,9 +190,14 @@ class _SmoothedSolver(CMMSolver):
             sigma = float(max(start.evals[-1], 1e-12))
         # every array of the problem in the computation dtype (float32 runs stay float32)
         dt = np.dtype(dtype or (jnp.float64 if jax.config.jax_enable_x64 else jnp.float32))
-        energy = cmm_energy(SparseOperator.from_scipy(W, dtype=dt), jnp.asarray(a, dtype=dt), mu,
+        Wop = SparseOperator.from_scipy(W, dtype=dt) if padded is None else SparseOperator.from_scipy(
+            padded.W, dtype=dt, width=padded.width)
+        energy = cmm_energy(Wop, host_array(a if padded is None else padded.a, dt), mu,
                             smoothing=self.smoothing, eps=self.eps, delta=self.delta, weighting=weighting,
                             runtime_smoothing=self.runtime_smoothing)
+        if padded is not None:  # the real rows' weights (uniform: 1/n of the real n), 0 on the padding
+            weights = padded.pad(l1_weights_np(a, weighting))
+            energy = eqx.tree_at(lambda e: e.weights, energy, host_array(weights, dt))
         low = min(self.eps, self.delta)
         schedule = _continuation(low, self.continuation, self.continuation_start)
         return sigma, dt, energy, schedule, (self.eps / low, self.delta / low)
@@ -201,6 +215,10 @@ class BlockCMM(_SmoothedSolver):
     optimizer: ``"cg"`` (Riemannian CG) or ``"lbfgs"`` (each active-set round restarts its memory).
     preconditioner: ``"shifted"`` (``(W + σA)⁻¹``, one factorisation) or ``"active_set"``
       (``W + σA`` plus the ℓ1 curvature of the entries pinned at zero, rebuilt every ``refresh`` iterations).
+    bucket_growth: the problem is padded to size buckets (``stiefel.buckets``, ``objectives.padding``:
+      rows, neighbour-table width and factor entries on a grid growing by this factor) so that meshes
+      of similar size share one compiled solver, also across processes through JAX's persistent
+      cache; the padded rows stay exactly zero. None: exact shapes. Only with the shifted preconditioner.
     """
 
     name: ClassVar[str] = "block"
@@ -211,9 +229,14 @@ class BlockCMM(_SmoothedSolver):
     optimizer: str = "cg"
     preconditioner: str = "shifted"
     refresh: int = 50
+    bucket_growth: float | None = DEFAULT_GROWTH
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        try:
+            check_growth(self.bucket_growth)
+        except ValueError as e:
+            raise SolverOptionError(f"BlockCMM: {e}") from None
         _check_number("ftol", self.ftol, 0)
         # the early stop of the intermediate continuation stages
         _check_int("stage_window", self.stage_window, 1, STALL_WINDOW_MAX)
@@ -233,10 +256,14 @@ class BlockCMM(_SmoothedSolver):
         ends the solve (status ``interrupted``, the current iterate)."""
         _no_callback(self, callback)
         stop_signal = stop
-        sigma, dt, energy, schedule, (ratio_e, ratio_d) = self._setup(W, a, mu, start, weighting, dtype)
-        P, t_factor = _shifted_inverse(W, a, sigma, dt) if self.preconditioner == "shifted" else (None, 0.0)
-        manifold = stiefel.GeneralizedStiefel(a, k, retraction="cholesky", dtype=dtype)
-        X = host_array(orthonormalize(np.asarray(start.X0, dtype=np.float64), a), dt)  # on the host: no compile
+        # the active-set preconditioner is a host callback (never cached): exact shapes for it
+        growth = self.bucket_growth if self.preconditioner == "shifted" else None
+        padded = PaddedProblem.build(W, a, growth)
+        sigma, dt, energy, schedule, (ratio_e, ratio_d) = self._setup(W, a, mu, start, weighting, dtype, padded)
+        P, t_factor = _shifted_inverse(W, a, sigma, dt, padded) if self.preconditioner == "shifted" else (None, 0.0)
+        manifold = stiefel.GeneralizedStiefel(padded.a, k, retraction="cholesky", dtype=dtype)
+        # A-orthonormalised on the host (no compilation), then padded with zero rows
+        X = host_array(padded.pad(orthonormalize(np.asarray(start.X0, dtype=np.float64), a)), dt)
         iters, wall, compile_t, status = 0, t_factor, 0.0, "converged"
         times, values, true_values = [], [], []
         active = None
@@ -271,8 +298,8 @@ class BlockCMM(_SmoothedSolver):
                 break
         history = {"time": np.asarray(times), "smoothed_objective": np.asarray(values),
                    "objective": np.asarray(true_values)}
-        Psi = orthonormalize(np.asarray(X, dtype=np.float64), a)  # exact A-orthonormality of the returned modes
-        return SolverRun(Psi, iters, status, wall, compile_t, history, {})
+        Psi = orthonormalize(padded.unpad(np.asarray(X, dtype=np.float64)), a)  # exact A-orthonormality
+        return SolverRun(Psi, iters, status, wall, compile_t, history, {"padded_size": padded.size})
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -291,7 +318,8 @@ class SequentialCMM(_SmoothedSolver):
         """``callback(j, info)`` after each finished column (``stiefel.minimize_sequential``'s), so a long run
         can save its columns; history ``time`` and ``smoothed_objective``, one entry per stage.
         ``progress(stiefel.Progress)`` after each column (a column is one compiled solve: no reports
-        inside it, and ``stop`` is not checked — Ctrl-C ends the run without a result)."""
+        inside it); ``stop`` is checked before each column and Ctrl-C ends the column running: the
+        columns not solved keep their projected starts (status ``interrupted``)."""
         callback = _column_progress(callback, progress, k, self.max_iters)
         sigma, dt, energy, schedule, (ratio_e, ratio_d) = self._setup(W, a, mu, start, weighting, dtype)
         P, t_factor = _shifted_inverse(W, a, sigma, dt)
@@ -305,7 +333,7 @@ class SequentialCMM(_SmoothedSolver):
             F = energy.with_params(eps=s * ratio_e, delta=s * ratio_d)
             res = stiefel.minimize_sequential(F, a, k, X0=np.asarray(X), preconditioner=P, gtol=self.gtol,
                                               max_iters=self.max_iters, budget=self.max_iters - iters, dtype=dtype,
-                                              callback=callback)
+                                              callback=callback, stop=stop)
             X = res.x
             iters += int(np.sum(np.asarray(res.iterations)))
             names = set(res.status_names)
@@ -316,6 +344,8 @@ class SequentialCMM(_SmoothedSolver):
             compile_t += res.compile_time
             if st != "converged":
                 status = st
+            if st == "interrupted":
+                break
         history = {"time": np.asarray(times), "smoothed_objective": np.asarray(values)}
         Psi = orthonormalize(np.asarray(X, dtype=np.float64), a)
         return SolverRun(Psi, iters, status, wall, compile_t, history, {})

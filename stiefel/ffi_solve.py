@@ -82,14 +82,24 @@ class CholeskyArrays(eqx.Module):
     n: int = eqx.field(static=True)
 
     @classmethod
-    def from_scipy(cls, S, *, check: bool = True) -> "CholeskyArrays":
+    def from_scipy(cls, S, *, check: bool = True, size: int | None = None) -> "CholeskyArrays":
         """The upper triangle of ``S``; with ``check``, factor it once now (``NotSPDError`` if CHOLMOD
         finds it indefinite). The factor stays in sparsax's cache, so the first solve inside a compiled
-        loop does not factor again."""
+        loop does not factor again. ``size``: at least this many stored entries — the extra ones lie
+        below the diagonal (row n−1, column 0, value 0), which CHOLMOD ignores (only ``rows ≤ cols`` is
+        read), so only the arrays' shapes change (``stiefel.buckets``)."""
         up = sp.triu(sp.csr_array(S, dtype=np.float64)).tocoo()
         n = int(S.shape[0])
-        out = cls(rows=host_array(up.row, np.int32), cols=host_array(up.col, np.int32),
-                  vals=host_array(up.data, np.float64), n=n)
+        rows, cols, vals = up.row, up.col, up.data
+        extra = max(0, int(size or 0) - up.nnz)
+        if extra and n < 2:
+            raise ValueError("padding the stored entries of a sparse factor needs n ≥ 2")
+        if extra:
+            rows = np.concatenate([rows, np.full(extra, n - 1)])
+            cols = np.concatenate([cols, np.zeros(extra, cols.dtype)])
+            vals = np.concatenate([vals, np.zeros(extra)])
+        out = cls(rows=host_array(rows, np.int32), cols=host_array(cols, np.int32),
+                  vals=host_array(vals, np.float64), n=n)
         if check:
             try:
                 jax.block_until_ready(_probe(out.rows, out.cols, out.vals, np.zeros((n,), np.float64)))

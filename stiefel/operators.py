@@ -187,7 +187,8 @@ class SparseOperator(LinearOperator):
 
     @classmethod
     def from_scipy(cls, matrix, *, factor: bool = False, dtype=None, vmap_method: str = "sequential",
-                   solve_backend: str | None = None) -> "SparseOperator":
+                   solve_backend: str | None = None, width: int | None = None,
+                   factor_size: int | None = None) -> "SparseOperator":
         """Build from any ``scipy.sparse`` matrix; ``factor=True`` prepares ``solve`` (and checks that
         the matrix is positive definite: ``NotSPDError``).
 
@@ -197,6 +198,10 @@ class SparseOperator(LinearOperator):
         ``jax.vmap``: ``"sequential"`` (one host call per batch member) or ``"expand_dims"`` (one
         host call for the whole batch; ``bench/bench_batch.py`` compares them); the custom call
         always solves a batch in one native call.
+
+        ``width`` and ``factor_size`` are lower bounds for the neighbour table's width and the custom
+        call's number of stored entries (padding that changes nothing but the shapes: operators of
+        different matrices with equal shapes share one compiled program, ``stiefel.buckets``).
         """
         if vmap_method not in ("sequential", "expand_dims"):
             raise ValueError(f"vmap_method must be 'sequential' or 'expand_dims', got {vmap_method!r}")
@@ -206,7 +211,7 @@ class SparseOperator(LinearOperator):
         n = csr.shape[0]
         dtype = np.dtype(dtype or (jnp.float64 if jax.config.jax_enable_x64 else jnp.float32))
         lengths = np.diff(csr.indptr)
-        width = max(int(lengths.max(initial=0)), 1)
+        width = max(int(lengths.max(initial=0)), 1, int(width or 0))
         rows = np.repeat(np.arange(n), lengths)
         slot = np.arange(csr.nnz) - np.repeat(csr.indptr[:-1], lengths)
         cols = np.tile(np.arange(n)[:, None], (1, width))
@@ -220,7 +225,7 @@ class SparseOperator(LinearOperator):
                              "(jax.config.update('jax_enable_x64', True))")
         host, chol = None, None
         if factor and solve_backend != "callback" and ffi_solve.available():
-            chol = ffi_solve.CholeskyArrays.from_scipy(csr)
+            chol = ffi_solve.CholeskyArrays.from_scipy(csr, size=factor_size)
         elif factor:
             host = _HostFactor(SymmetricFactor(csr), dtype, _fingerprint(csr))
         return cls(  # converted on the host: a dtype conversion on the device would compile a program

@@ -35,6 +35,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ._compile import is_traced, run_compiled
+from .driver import _stopped
 from .errors import RankDeficientError, ShapeError, StiefelError
 from .linesearch import along_curve, strong_wolfe
 from .operators import LinearOperator, as_operator
@@ -267,6 +268,7 @@ def minimize_sequential(
     throw: bool = False,
     callback: Callable | None = None,
     budget: int | None = None,
+    stop=None,
 ) -> SequentialResult:
     """Find ``k`` M-orthonormal columns one at a time (thesis Algorithm 6).
 
@@ -301,6 +303,9 @@ def minimize_sequential(
         each column (progress reporting, saving partial results).
       budget: optional total ``0 ≤ budget ≤ max_iters`` used instead of ``max_iters`` without
         recompiling (warm-started stages sharing one total pass what is left).
+      stop: optional ``threading.Event`` (or a callable returning True) checked before each column; once
+        it is set — or after a ``KeyboardInterrupt`` during a column — the remaining columns keep their
+        projected starts (status ``interrupted``, 0 iterations, value NaN) and the call returns.
 
     Every option is checked before any work (``ParameterError``; ``RankDeficientError`` for an ``X0``
     with dependent columns).
@@ -353,6 +358,7 @@ def minimize_sequential(
     hist = []
     times, compile_total, t_start = [], 0.0, time.perf_counter()
     left = budget  # iterations the remaining columns share (fairly, see max_iters)
+    stopped = False
     for j in range(k):
         S = SequentialConstraint(op, Phi)
         y = X0[:, j] if X0 is not None else jax.random.normal(keys[j], (n,), dtype=dt)
@@ -365,8 +371,18 @@ def minimize_sequential(
                 )
         x0 = S.project(y)
         share = -(-left // (k - j))  # ⌈left / columns to go⌉: a fair part of what is left
-        res, t_compile, t_run = run_compiled(_column_core, f, op, P, Phi, active, x0, jnp.asarray(share, jnp.int32),
-                                             opts)
+        stopped = stopped or _stopped(stop)
+        if not stopped:
+            try:
+                res, t_compile, t_run = run_compiled(_column_core, f, op, P, Phi, active, x0,
+                                                     jnp.asarray(share, jnp.int32), opts)
+            except KeyboardInterrupt:
+                stopped = True
+        if stopped:  # this column and the later ones keep their projected starts
+            zero = jnp.asarray(0, jnp.int32)
+            res = (x0, jnp.asarray(np.nan, dt), jnp.asarray(np.nan, dt), zero,
+                   jnp.asarray(Status.INTERRUPTED, jnp.int32), History.empty(opts.max_iters + 1, dt), zero, zero)
+            t_compile, t_run = 0.0, 0.0
         x, fx, gn, it, st, h, nf, nr = res
         left -= int(it)
         compile_total += t_compile
@@ -377,7 +393,7 @@ def minimize_sequential(
                            (fx, gn, it, st, nf, nr)):
             out[name].append(v)
         hist.append(h)
-        if callback is not None:
+        if callback is not None and not stopped:
             callback(j, {"x": np.asarray(x), "value": float(fx), "grad_norm": float(gn),
                          "iterations": int(it), "status": Status.name(st), "time": t_run})
     history = History(*(jnp.stack([getattr(h, fld) for h in hist]) for fld in ("value", "grad_norm", "step", "monitor")))

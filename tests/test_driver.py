@@ -187,9 +187,9 @@ def test_persistent_cache_serves_the_solver_in_a_new_process(tmp_path):
 
 
 @pytest.mark.parametrize("method", ["admm", "admm_sequential", "fast", "sequential"])
-def test_every_cmm_solver_reports_progress_and_admm_ones_stop(method):
+def test_every_cmm_solver_reports_progress_and_stops(method):
     """Progress reaches every CMM solver (ADMM ones a few times per second, the sequential one per column,
-    the last report at the end); the host-loop ADMM solvers also stop on ``stop`` with the iterate reached."""
+    the last report at the end); they stop on ``stop`` with the iterate reached (sequential: between columns)."""
     import mesh
     from cli.demo_mesh import demo_mesh
     from objectives.cmm import compressed_modes
@@ -204,10 +204,13 @@ def test_every_cmm_solver_reports_progress_and_admm_ones_stop(method):
     r = compressed_modes(lap, 3, 0.01 * lap.n, solver=make(), progress=reports.append)
     assert reports and reports[-1].iteration == r.iterations and reports[-1].remaining == 0.0
     assert all(p.method == method for p in reports)
+    stop = threading.Event()
     if method == "sequential":
         assert [p.stage for p in reports] == [0, 1, 2] and all(p.n_stages == 3 for p in reports)
+        # stopped after the first column: the other two keep their (projected) starts
+        r2 = compressed_modes(lap, 3, 0.01 * lap.n, solver=make(), progress=lambda info: stop.set(), stop=stop)
+        assert r2.status == "interrupted" and r2.iterations < r.iterations and r2.orthogonality <= 1e-10
         return
-    stop = threading.Event()
 
     r2 = compressed_modes(lap, 3, 0.01 * lap.n, solver=make(), progress=lambda info: stop.set(), stop=stop)
     assert r2.status == "interrupted" and r2.iterations < min(r.iterations, 300) and r2.orthogonality <= 1e-10
