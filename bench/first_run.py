@@ -17,7 +17,7 @@ against none, and the time per iteration with the problem padded by 0–40 % (``
 which chose ``stiefel.buckets.DEFAULT_GROWTH``.
 
     python -m bench first-run                       # the demo mesh (no files needed)
-    python -m bench first-run --meshes ../shared/meshes/fandisk.off ../shared/meshes/camelhead.off
+    python -m bench first-run --meshes demo ../shared/meshes/fandisk.off ../shared/meshes/camelhead.off
 """
 
 from __future__ import annotations
@@ -192,6 +192,8 @@ def main(argv=None) -> int:
     p.add_argument("--no-compare", action="store_true", help="skip compare-smoothings")
     p.add_argument("--no-in-process", action="store_true", help="skip progress overhead and padding cost")
     p.add_argument("--padding", default="0,0.1,0.2,0.4", help="padding fractions for the padding cost")
+    p.add_argument("--heavy-max-n", type=int, default=12000,
+                   help="compare-smoothings and the in-process measurements only on meshes up to this many vertices")
     p.add_argument("--out", type=Path, default=ROOT / "bench" / "RESULTS_first_run.md")
     p.add_argument("--json", type=Path, default=ROOT / "bench" / "results_first_run.json")
     args = p.parse_args(argv)
@@ -199,22 +201,28 @@ def main(argv=None) -> int:
 
     results = {}
     with tempfile.TemporaryDirectory() as tmp:
-        meshes = args.meshes
-        if not meshes:
+        meshes = list(args.meshes or ["demo"])
+        if "demo" in meshes:  # the built-in demo mesh, as a file
             import trimesh
             from cli.demo_mesh import demo_mesh
 
             v, f = demo_mesh()
-            meshes = [str(Path(tmp) / "demo.off")]
-            trimesh.Trimesh(v, f, process=False).export(meshes[0])
+            meshes[meshes.index("demo")] = str(Path(tmp) / "demo.off")
+            trimesh.Trimesh(v, f, process=False).export(Path(tmp) / "demo.off")
+        sizes = {}
         for i, path in enumerate(map(Path, meshes)):
             work = Path(tmp) / f"m{i}"
             work.mkdir()
             name = path.stem
             print(f"[first-run] {name}: CLI processes", file=sys.stderr, flush=True)
-            results[name] = {"cli": cli_rows(path, work, admm=not args.no_admm, compare=not args.no_compare)}
+            import mesh
+
+            sizes[name] = mesh.load(path).n_vertices
+            heavy = sizes[name] <= args.heavy_max_n
+            results[name] = {"cli": cli_rows(path, work, admm=not args.no_admm,
+                                             compare=heavy and not args.no_compare)}
         for path in map(Path, meshes):
-            if not args.no_in_process:
+            if not args.no_in_process and sizes[path.stem] <= args.heavy_max_n:
                 print(f"[first-run] {path.stem}: progress overhead and padding cost", file=sys.stderr, flush=True)
                 results[path.stem]["in_process"] = in_process(path, 10, [float(x) for x in args.padding.split(",")])
     meta = run_meta("bench", ["first-run", *(argv if argv is not None else sys.argv[1:])])

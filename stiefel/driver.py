@@ -30,9 +30,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import block_steps as _steps
+from . import ffi_solve, program_cache
 from ._compile import compile_aot, host_array
 from .errors import SolverError
-from .result import Status
+from .result import History, Status
 
 __all__ = ["Progress", "CallbackError", "HostMonitor", "run_chunked", "DEFAULT_INTERVAL"]
 
@@ -129,6 +130,13 @@ class _Estimate:
         return min(cap, (math.log(gnorm) - math.log(self.gtol)) / rate)
 
 
+def _program(fn, args: tuple, out_template):
+    """``fn(*args)`` compiled: from ``stiefel.program_cache`` (no tracing) where it can serve it, else
+    traced and compiled (``compile_aot``)."""
+    call = program_cache.load_or_export(fn, args, out_template, custom_calls=ffi_solve.CUSTOM_CALLS)
+    return call if call is not None else compile_aot(fn, *args)
+
+
 def run_chunked(solver, fn, X0, args, max_iters: int, *, progress: Callable | None = None,
                 interval: float = DEFAULT_INTERVAL, stop=None, method: str = ""):
     """Run ``solver`` (a ``stiefel`` Riemannian minimiser) on ``fn(X, args)`` from ``X0`` for at most
@@ -141,9 +149,10 @@ def run_chunked(solver, fn, X0, args, max_iters: int, *, progress: Callable | No
     """
     fn = _NoAux(fn)
     t0 = time.perf_counter()
-    init = compile_aot(_init, solver, fn, X0, args)
+    template = _steps.State(*([0] * len(_steps.State._fields)))._replace(history=History(0, 0, 0, 0), aux=None)
+    init = _program(_init, (solver, fn, X0, args), template)
     state = init(solver, fn, X0, args)
-    advance = compile_aot(_advance, solver, fn, args, state, host_array(0, np.int32))
+    advance = _program(_advance, (solver, fn, args, state, host_array(0, np.int32)), (template, 0))
     t_compile = time.perf_counter() - t0
     estimate = _Estimate(float(np.asarray(solver.atol)))
     t_start = time.perf_counter()

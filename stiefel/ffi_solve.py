@@ -38,6 +38,8 @@ from .errors import NotSPDError
 __all__ = ["CholeskyArrays", "available", "MODE_ENV"]
 
 MODE_ENV = "STIEFEL_SPARSAX_MODE"
+#: the custom-call targets of ``CholeskyArrays.solve`` (allowed in stored programs, ``stiefel.program_cache``)
+CUSTOM_CALLS = ("sparsax_solve_f64",)
 _MODES = ("simplicial", "auto", "supernodal")
 _configured: list[str] = []
 

@@ -279,7 +279,10 @@ class SparseOperator(LinearOperator):
 
 
 class _Frozen(_ByContent):
-    """Wraps a host CSR matrix as a static pytree field, compared by content."""
+    """Wraps a host CSR matrix as a static pytree field, compared by content (host-only: no compiled
+    program reads it, ``stiefel.program_cache``)."""
+
+    program_irrelevant = True
 
     def __init__(self, value):
         self.value = value
