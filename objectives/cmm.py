@@ -111,6 +111,23 @@ def unpack_laplacian(lap):
     return W, a
 
 
+def _given_eigenpairs(pairs, n: int, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """The first ``m`` of precomputed eigenpairs ``(evals (≥ m,), evecs (n, ≥ m))``, checked."""
+    try:
+        evals, evecs = pairs
+    except (TypeError, ValueError):
+        raise ParameterError("eigenpairs must be a pair (evals, evecs)") from None
+    evals, evecs = np.asarray(evals, dtype=np.float64), np.asarray(evecs, dtype=np.float64)
+    if evals.ndim != 1 or evals.shape[0] < m or evecs.ndim != 2 or evecs.shape[0] != n or evecs.shape[1] < m:
+        raise ShapeError(f"eigenpairs must hold at least max(k, 2) = {m} eigenpairs of this Laplacian: evals "
+                         f"(≥ {m},), evecs ({n}, ≥ {m}); got {evals.shape} and {evecs.shape}")
+    check_finite("eigenpairs (evals)", evals[:m])
+    check_finite("eigenpairs (evecs)", evecs[:, :m])
+    if np.any(np.diff(evals[:m]) < 0):
+        raise ParameterError("eigenpairs: the eigenvalues must be in ascending order")
+    return evals[:m], evecs[:, :m]
+
+
 def first_eigenpairs(W, a, k):
     """The k smallest generalised eigenpairs of ``(W, diag(a))``, A-orthonormal (shift-invert eigsh).
 
@@ -183,6 +200,7 @@ def compressed_modes(
     progress: Callable | None = None,
     stop=None,
     verbose: bool = False,
+    eigenpairs: tuple | None = None,
 ) -> CMMResult:
     """Compressed manifold modes of a Laplacian ``(W, A)``.
 
@@ -207,6 +225,10 @@ def compressed_modes(
       stop: a ``threading.Event`` (or a callable returning True) checked between chunks by solvers with
         ``supports_progress``; when set — or on Ctrl-C during such a solve — the result holds the modes
         reached, with status ``"interrupted"``.
+
+      eigenpairs: optional ``(evals, evecs)``, the first ``m ≥ max(k, 2)`` generalised eigenpairs of
+        ``(W, A)`` (ascending, A-orthonormal: ``first_eigenpairs(W, a, m)``), used instead of solving
+        for them — for several solves of one Laplacian (``stiefel compare-smoothings`` computes them once).
 
     Everything is checked before any work: ``ParameterError`` / ``SolverOptionError`` for options,
     ``NonFiniteError`` for NaN/inf in W, A or the start, ``RankDeficientError`` for a start whose
@@ -236,7 +258,12 @@ def compressed_modes(
         progress = _printer(progress)
     live = dict(progress=progress, stop=stop) if solver.supports_progress else {}
     t_setup = time.perf_counter()
-    evals, evecs = first_eigenpairs(W, a, max(k, 2)) if solver.needs_eigenpairs(kind) else (None, None)
+    if eigenpairs is not None:
+        evals, evecs = _given_eigenpairs(eigenpairs, n, max(k, 2))
+    elif solver.needs_eigenpairs(kind):
+        evals, evecs = first_eigenpairs(W, a, max(k, 2))
+    else:
+        evals, evecs = None, None
     if solver.restricted:
         X0 = None
     elif kind == "eigen":

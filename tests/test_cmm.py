@@ -332,3 +332,29 @@ def test_soft_threshold_is_the_l1_prox():
         assert abs(float(soft_threshold(np.asarray(v), t)) - best) <= 1e-4
     V = np.array([[1.0, -2.0], [0.1, 0.0]])
     np.testing.assert_array_equal(soft_threshold(V, np.array([[0.5], [0.2]])), [[0.5, -1.5], [0.0, 0.0]])
+
+
+def test_precomputed_eigenpairs_give_the_same_solve(knight):
+    """``eigenpairs=`` replaces the eigensolve (same start and shift, so the same modes); bad pairs are
+    refused before any work."""
+    from stiefel.errors import NonFiniteError, ParameterError, ShapeError
+
+    W, a = knight.W, knight.A.diagonal()
+    pairs = first_eigenpairs(W, a, 4)  # what compressed_modes computes for k = 4
+    solver = BlockCMM(max_iters=300)
+    ref = compressed_modes(knight, 4, 0.05 * knight.n, solver=solver)
+    got = compressed_modes(knight, 4, 0.05 * knight.n, solver=solver, eigenpairs=pairs)
+    assert got.iterations == ref.iterations and np.array_equal(got.modes, ref.modes)
+    more = first_eigenpairs(W, a, 6)  # more pairs than needed: the first max(k, 2) are used
+    assert compressed_modes(knight, 4, 0.05 * knight.n, solver=solver, eigenpairs=more).objective == pytest.approx(
+        ref.objective, rel=1e-6)
+    with pytest.raises(ShapeError, match="at least max"):
+        compressed_modes(knight, 4, 1.0, eigenpairs=(pairs[0][:3], pairs[1][:, :3]))
+    with pytest.raises(ParameterError, match="pair"):
+        compressed_modes(knight, 4, 1.0, eigenpairs=pairs[0])
+    with pytest.raises(ParameterError, match="ascending"):
+        compressed_modes(knight, 4, 1.0, eigenpairs=(pairs[0][::-1], pairs[1]))
+    bad = pairs[1].copy()
+    bad[0, 0] = np.nan
+    with pytest.raises(NonFiniteError):
+        compressed_modes(knight, 4, 1.0, eigenpairs=(pairs[0], bad))
