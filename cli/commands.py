@@ -282,7 +282,11 @@ def cmd_eigs(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir) 
     t_setup = time.perf_counter() - t_all
     say(f"mesh {mesh_info['source']}: n = {m.n_vertices} vertices, {m.n_faces} faces")
     t = time.perf_counter()
-    eb = mesh.eigenbasis(lap, args.k, seed=args.seed)
+    bar = SolveProgress(quiet=args.quiet, label="eigsh")
+    try:
+        eb = mesh.eigenbasis(lap, args.k, seed=args.seed, progress=bar)
+    finally:
+        bar.close()
     t_eig = time.perf_counter() - t
     t = time.perf_counter()
     evals, evecs = np.asarray(eb.evals), np.asarray(eb.evecs)

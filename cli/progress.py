@@ -9,6 +9,7 @@ report. Always stderr, so ``--json`` keeps stdout to its one JSON object.
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 from typing import Any, TextIO
@@ -54,7 +55,11 @@ class SolveProgress:
 
             self.bar = tqdm(desc=self.label, unit="it", file=self.stream, dynamic_ncols=True, leave=True)
         self.bar.update(max(0, info.iteration - self.bar.n))
-        post = {"f": f"{info.objective:.6g}", "|g|": f"{info.grad_norm:.1e}"}
+        post = {}
+        if math.isfinite(info.objective):  # NaN: not known (eigsh)
+            post["f"] = f"{info.objective:.6g}"
+        if math.isfinite(info.grad_norm):
+            post["|g|"] = f"{info.grad_norm:.1e}"
         if info.n_stages > 1:
             post["stage"] = f"{info.stage + 1}/{info.n_stages}"
         if info.remaining is not None and info.remaining > 0:

@@ -15,7 +15,8 @@ thread settings (a global side effect); set the variable before starting Python.
 
 from __future__ import annotations
 
-from typing import NamedTuple
+import time
+from typing import Callable, NamedTuple
 
 import numpy as np
 import scipy.linalg as sla
@@ -23,6 +24,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from jaxtyping import Float
 
+from stiefel.driver import Progress
 from stiefel.sparse_factor import SymmetricFactor
 from stiefel.validation import check_finite, check_number, is_integer
 
@@ -74,6 +76,30 @@ def _check_inputs(lap: Laplacian, k, sigma, tol, seed) -> None:
         check_finite(name, M, error=EigenInputError)
 
 
+class _Reporter:
+    """Counts the shift-invert solves of an ARPACK run and reports them (``eigenbasis(progress=)``)."""
+
+    def __init__(self, progress: Callable, interval: float = 0.25):
+        self.progress, self.interval = progress, interval
+        self.count, self.t0, self.last = 0, time.perf_counter(), float("-inf")
+
+    def wrap(self, op: spla.LinearOperator) -> spla.LinearOperator:
+        def matvec(x):
+            self.count += 1
+            self.tick()
+            return op.matvec(x)
+
+        return spla.LinearOperator(op.shape, matvec=matvec, dtype=op.dtype)
+
+    def tick(self, final: bool = False) -> None:
+        now = time.perf_counter()
+        if final or now - self.last >= self.interval:
+            self.last = now
+            self.progress(Progress(iteration=self.count, max_iters=0, objective=float("nan"),
+                                   grad_norm=float("nan"), elapsed=now - self.t0,
+                                   remaining=0.0 if final else None, method="eigsh"))
+
+
 def eigenbasis(
     lap: Laplacian,
     k: int,
@@ -81,6 +107,7 @@ def eigenbasis(
     sigma: float | None = None,
     tol: float = 0.0,
     seed: int = 0,
+    progress: Callable | None = None,
 ) -> Eigenbasis:
     """The first ``k`` generalised eigenpairs of ``Wφ = λAφ``, A-orthonormal, ascending.
 
@@ -90,6 +117,10 @@ def eigenbasis(
       sigma: shift (default ``−1e-8·s``, ``s`` a spectral scale).
       tol: ARPACK tolerance (0: machine precision).
       seed: seeds ARPACK's start vector (deterministic results).
+      progress: optional ``progress(stiefel.Progress)``, at most every 0.25 s while ARPACK iterates and
+        once at the end: ``iteration`` counts the shift-invert solves (Lanczos steps; ``max_iters`` 0:
+        no fixed cap), objective and gradient norm are NaN (ARPACK reports no residual on the way),
+        ``method="eigsh"``.
 
     Returns:
       ``Eigenbasis(evals (k,), evecs (n, k))``.
@@ -106,11 +137,16 @@ def eigenbasis(
     if sigma is None:
         sigma = -1e-8 * _spectral_scale(lap)
     op_inv = SymmetricFactor(W - sigma * A, check=False).as_linear_operator()
+    report = None if progress is None else _Reporter(progress)
+    if report is not None:
+        op_inv = report.wrap(op_inv)
     v0 = np.random.default_rng(seed).standard_normal(n)
     ncv = min(n, max(3 * k, 30))
     evals, evecs = spla.eigsh(
         W, k=k, M=A, sigma=sigma, which="LM", OPinv=op_inv, v0=v0, tol=tol, ncv=ncv
     )
+    if report is not None:
+        report.tick(final=True)
     order = np.argsort(evals)
     evals, evecs = evals[order], evecs[:, order]
     # A-orthonormalise (ARPACK's vectors are A-orthogonal to working precision; this

@@ -68,8 +68,10 @@ class Progress(NamedTuple):
         """A one-line summary: ``it 120/5000  f = 953.6  |g| = 1.2e-04  stage 4/4  3.1 s, ~1.2 s left``."""
         left = "" if self.remaining is None else f", ~{self.remaining:.1f} s left"
         stage = f"  stage {self.stage + 1}/{self.n_stages}" if self.n_stages > 1 else ""
-        return (f"it {self.iteration}/{self.max_iters}  f = {self.objective:.7g}  |g| = {self.grad_norm:.2e}"
-                f"{stage}  {self.elapsed:.1f} s{left}")
+        cap = f"/{self.max_iters}" if self.max_iters > 0 else ""
+        f = f"  f = {self.objective:.7g}" if math.isfinite(self.objective) else ""  # NaN: not known (eigsh)
+        g = f"  |g| = {self.grad_norm:.2e}" if math.isfinite(self.grad_norm) else ""
+        return f"it {self.iteration}{cap}{f}{g}{stage}  {self.elapsed:.1f} s{left}"
 
 
 class CallbackError(SolverError):

@@ -109,3 +109,16 @@ def test_eigenpairs_large(name):
     evals, evecs = mesh.eigenbasis(lap, 50)
     _check_pairs(lap, evals, evecs)
     assert abs(evals[0]) <= 1e-9 * evals[1]
+
+
+def test_eigenbasis_reports_progress_without_changing_the_result():
+    """``progress=`` counts ARPACK's shift-invert solves (a report at once, the last one at the end) and
+    changes nothing."""
+    lap = mesh.laplacian(sphere())
+    reports = []
+    eb = mesh.eigenbasis(lap, 8, progress=reports.append)
+    ref = mesh.eigenbasis(lap, 8)
+    assert np.array_equal(eb.evals, ref.evals) and np.array_equal(eb.evecs, ref.evecs)
+    assert len(reports) >= 2 and reports[0].iteration == 1 and reports[-1].remaining == 0.0
+    assert reports[-1].iteration >= 8 and all(r.method == "eigsh" for r in reports)
+    assert "f =" not in reports[-1].line() and reports[-1].line().startswith(f"it {reports[-1].iteration} ")
