@@ -50,14 +50,27 @@ def _writable(path: Path) -> str | None:
     return None
 
 
+def _disable() -> None:
+    """No persistent cache for this run, also after an earlier in-process run that turned it on."""
+    import jax
+
+    if jax.config.jax_compilation_cache_dir:
+        from jax.experimental.compilation_cache import compilation_cache
+
+        jax.config.update("jax_compilation_cache_dir", None)
+        compilation_cache.reset_cache()
+
+
 def enable(cache_dir: Path | None, disabled: bool) -> tuple[str | None, str | None]:
     """Turn JAX's persistent compilation cache on (before any compilation); return ``(directory used or
     None, warning or None)``."""
     if disabled or (cache_dir is None and os.environ.get(ENV, "").strip().lower() == "off"):
+        _disable()
         return None, None
     path = Path(cache_dir).expanduser() if cache_dir is not None else default_dir()
     why = _writable(path)
     if why is not None:
+        _disable()
         return None, f"compilation cache {path} is not usable ({why}); running without it"
     import jax
     from jax.experimental.compilation_cache import compilation_cache

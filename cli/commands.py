@@ -98,10 +98,18 @@ def _check_k(k: int, n: int) -> None:
         raise CLIError(f"k = {k} must be smaller than the number of vertices n = {n}")
 
 
+def _program_counts() -> dict:
+    from stiefel.program_cache import STATS
+
+    return {"loaded": STATS["loaded"], "stored": STATS["exported"], "reused": STATS["memory"]}
+
+
 def _summary_head(args: argparse.Namespace, argv: Sequence[str] | None, mesh_info: dict) -> dict:
     return {"command": args.command, "argv": list(argv) if argv is not None else sys.argv[1:],
             "mesh": mesh_info, "seed": args.seed, "versions": versions(),
             "compilation_cache": getattr(args, "cache_used", None),
+            # this run's solver programs: from the store (no tracing), traced and stored, reused in the run
+            "stored_programs": _program_counts() if getattr(args, "cache_used", None) else None,
             "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
 
 

@@ -66,34 +66,42 @@ def _ours(obj) -> bool:
     return module.split(".")[0] in _PACKAGES
 
 
-def describe(obj, depth: int = 0) -> str:
+def describe(obj, depth: int = 0, embedded: bool = False) -> str:
     """A description of ``obj`` that is the same in every process exactly when its effect on a traced
-    program is: arrays by shape and dtype, plain values by ``repr``, this project's modules field by
-    field and its functions by name. Raises ``Uncacheable`` for anything else."""
+    program is: arrays by shape and dtype (program inputs; by content where ``embedded``, i.e. inside
+    a static field, whose arrays become constants of the program), plain values by ``repr``, this
+    project's modules field by field and its functions by name. Raises ``Uncacheable`` for anything
+    else."""
     if depth > 40:
         raise Uncacheable("nested too deeply")
+    d = functools.partial(describe, depth=depth + 1, embedded=embedded)
     if obj is None or isinstance(obj, (bool, int, str, bytes, np.dtype)):
         return repr(obj)
     if isinstance(obj, float):
         return repr(float(obj))
     if isinstance(obj, (jax.Array, np.ndarray, np.generic, jax.ShapeDtypeStruct)):
         weak = getattr(obj, "weak_type", False)
-        return f"a{tuple(np.shape(obj))}{np.dtype(obj.dtype).str}{'w' if weak else ''}"
+        text = f"a{tuple(np.shape(obj))}{np.dtype(obj.dtype).str}{'w' if weak else ''}"
+        if embedded and not isinstance(obj, jax.ShapeDtypeStruct):
+            text += hashlib.blake2b(np.ascontiguousarray(np.asarray(obj)).tobytes(), digest_size=16).hexdigest()
+        return text
     if isinstance(obj, tuple) and hasattr(obj, "_fields") and _ours(type(obj)):  # our NamedTuples
-        return f"{type(obj).__qualname__}(" + ",".join(describe(v, depth + 1) for v in obj) + ")"
+        return f"{type(obj).__qualname__}(" + ",".join(d(v) for v in obj) + ")"
     if isinstance(obj, (tuple, list)):
-        return ("(" if isinstance(obj, tuple) else "[") + ",".join(describe(v, depth + 1) for v in obj) + ")"
+        return ("(" if isinstance(obj, tuple) else "[") + ",".join(d(v) for v in obj) + ")"
     if isinstance(obj, dict):
-        return "{" + ",".join(f"{describe(k)}:{describe(v, depth + 1)}" for k, v in sorted(obj.items(), key=repr)) + "}"
+        return "{" + ",".join(f"{d(k)}:{d(v)}" for k, v in sorted(obj.items(), key=repr)) + "}"
     if getattr(obj, "program_irrelevant", False):  # host-only data (e.g. SparseOperator.csr)
         return f"<{type(obj).__qualname__}>"
-    if isinstance(obj, types.MethodType) or type(obj).__name__ == "BoundMethod":  # eqx wraps bound methods
+    if isinstance(obj, types.MethodType) or type(obj).__name__ == "BoundMethod":
         func = getattr(obj, "__func__", None) or getattr(obj, "__wrapped__", None)
         name = getattr(func, "__qualname__", None) or getattr(obj, "__qualname__", "?")
-        return f"{describe(obj.__self__, depth + 1)}.{name}"
+        # equinox's BoundMethod is a pytree (its object's arrays are program inputs); a plain bound
+        # method is a leaf, so its object's arrays would be constants of the program
+        inner = embedded or isinstance(obj, types.MethodType)
+        return f"{describe(obj.__self__, depth + 1, inner)}.{name}"
     if isinstance(obj, functools.partial):
-        return f"partial({describe(obj.func, depth + 1)},{describe(obj.args, depth + 1)}," \
-               f"{describe(obj.keywords, depth + 1)})"
+        return f"partial({d(obj.func)},{d(obj.args)},{d(obj.keywords)})"
     if isinstance(obj, types.FunctionType):
         if not _ours(obj) or obj.__closure__ or "<lambda>" in obj.__qualname__ or "<locals>" in obj.__qualname__:
             raise Uncacheable(f"function {obj.__module__}.{obj.__qualname__}")
@@ -103,7 +111,8 @@ def describe(obj, depth: int = 0) -> str:
             raise Uncacheable(f"type {obj!r}")
         return f"{obj.__module__}.{obj.__qualname__}"
     if isinstance(obj, eqx.Module) and _ours(type(obj)):
-        fields = ",".join(f"{f.name}={describe(getattr(obj, f.name), depth + 1)}" for f in dataclasses.fields(obj))
+        fields = ",".join(f"{f.name}={describe(getattr(obj, f.name), depth + 1, embedded or bool(f.metadata.get('static')))}"
+                          for f in dataclasses.fields(obj))
         return f"{type(obj).__module__}.{type(obj).__qualname__}({fields})"
     raise Uncacheable(f"{type(obj).__module__}.{type(obj).__qualname__}")
 

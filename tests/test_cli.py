@@ -289,6 +289,27 @@ def test_compilation_cache_options(tmp_path: Path, capsys: pytest.CaptureFixture
     assert json.loads((out / "summary.json").read_text())["compilation_cache"] is None
     assert main(["eigs", "-k", "3", "--quiet", "--no-cache", "--cache-dir", str(cache), "--out", str(out)]) == 0
     assert json.loads((out / "summary.json").read_text())["compilation_cache"] is None
+    import jax
+
+    assert not jax.config.jax_compilation_cache_dir  # --no-cache turns off what an earlier run turned on
+
+
+def test_stored_programs_are_counted_in_the_summary(tmp_path: Path) -> None:
+    """A second run with the same cache loads the solver programs instead of tracing them."""
+    from stiefel import program_cache
+
+    cache = tmp_path / "cache"
+    counts = []
+    for run in ("a", "b"):
+        program_cache._MEMORY.clear()  # as in a new process
+        assert main(["modes", "-k", "3", "--quiet", "--no-png", "--max-iters", "40", "--cache-dir", str(cache),
+                     "--out", str(tmp_path / run)]) == 0
+        counts.append(json.loads((tmp_path / run / "summary.json").read_text())["stored_programs"])
+    assert counts[0]["stored"] >= 2 and counts[1]["loaded"] >= counts[0]["loaded"] + 2
+    assert counts[1]["stored"] == counts[0]["stored"]
+    assert main(["modes", "-k", "3", "--quiet", "--no-png", "--max-iters", "40", "--no-cache",
+                 "--out", str(tmp_path / "c")]) == 0
+    assert json.loads((tmp_path / "c" / "summary.json").read_text())["stored_programs"] is None
 
 
 def test_ctrl_c_during_the_solve_writes_the_modes_reached(tmp_path: Path, capsys: pytest.CaptureFixture,

@@ -42,6 +42,21 @@ def test_describe_pins_static_parts_and_refuses_unknown_code():
     assert pc.program_key(lambda x: x, ()) is None
 
 
+@pytest.mark.filterwarnings("ignore:A JAX array is being set as static")
+def test_arrays_in_static_fields_are_described_by_content():
+    """A static field's arrays are constants of the traced program: their values are part of the key."""
+    import equinox as eqx
+
+    class Holder(eqx.Module):
+        table: np.ndarray = eqx.field(static=True)
+        x: jax.Array
+
+    Holder.__module__ = "stiefel.tests_only"  # a module of this project, for describe
+    one = Holder(np.arange(3.0), jnp.zeros(2))
+    assert pc.describe(one) == pc.describe(Holder(np.arange(3.0), jnp.ones(2)))  # x is an input
+    assert pc.describe(one) != pc.describe(Holder(np.arange(3.0) + 1, jnp.zeros(2)))  # table is a constant
+
+
 @pytest.mark.skipif(bool(jax.config.jax_compilation_cache_dir), reason="JAX's persistent cache is on here")
 def test_no_store_without_jax_cache_dir():
     from stiefel.driver import _init
