@@ -59,17 +59,27 @@ def _sibling(path: Path, out: Path) -> tuple[Path, int, int]:
     in the same size bucket: ``(path, n, n_sibling)``."""
     import mesh
     import trimesh
-    from stiefel.buckets import DEFAULT_GROWTH, bucket
+    from objectives.padding import PaddedProblem
+    from stiefel.buckets import DEFAULT_GROWTH
+
+    def shapes(m):
+        lap = mesh.laplacian(m)
+        p = PaddedProblem.build(lap.W, lap.A.diagonal(), DEFAULT_GROWTH)
+        return p.size, p.width, p.factor_size
 
     m = mesh.load(path)
     V, F = np.asarray(m.vertices), np.asarray(m.faces)
-    n = len(V)
-    for frac in (0.03, 0.01, 0.003):
+    n, want = len(V), shapes(m)
+    for frac in (0.03, 0.02, 0.01, 0.005, 0.002, 0.001):  # the largest cut that keeps every padded shape
         cut = n - max(1, int(frac * n))
         keep = F[(F < cut).all(axis=1)]
         t = trimesh.Trimesh(V, keep, process=False)
         t.remove_unreferenced_vertices()
-        if bucket(len(t.vertices), DEFAULT_GROWTH) == bucket(n, DEFAULT_GROWTH) and len(t.vertices) < n:
+        try:
+            same = len(t.vertices) < n and shapes(mesh.load((np.asarray(t.vertices), np.asarray(t.faces)))) == want
+        except mesh.MeshError:
+            same = False
+        if same:
             break
     target = out / f"{path.stem}-sibling.off"
     t.export(target)
@@ -150,6 +160,9 @@ def report(results: dict, meta: dict) -> str:
              "| mesh | n | run | process s | compile s | solve s | setup s | write s | iterations | objective |",
              "|---|---|---|---|---|---|---|---|---|---|"]
     for name, res in results.items():
+        if "error" in res:
+            lines.append(f"| {name} | – | failed: {res['error'][:120]} | | | | | | | |")
+            continue
         for run, row in res["cli"].items():
             t = row["timings"]
             lines.append(f"| {name} | {row['n']} | {run} | {row['process_s']:.2f} | {t.get('compile_s', 0):.2f} | "
@@ -159,6 +172,8 @@ def report(results: dict, meta: dict) -> str:
               "| mesh | block cold / ADMM | compile-excluded | compare-smoothings / modes (cold) | compile-excluded |",
               "|---|---|---|---|---|"]
     for name, res in results.items():
+        if "error" in res:
+            continue
         c = res["cli"]
         cold = c["cold"]
 
@@ -217,12 +232,17 @@ def main(argv=None) -> int:
             print(f"[first-run] {name}: CLI processes", file=sys.stderr, flush=True)
             import mesh
 
-            sizes[name] = mesh.load(path).n_vertices
-            heavy = sizes[name] <= args.heavy_max_n
-            results[name] = {"cli": cli_rows(path, work, admm=not args.no_admm,
-                                             compare=heavy and not args.no_compare)}
+            try:
+                sizes[name] = mesh.load(path).n_vertices
+                heavy = sizes[name] <= args.heavy_max_n
+                results[name] = {"cli": cli_rows(path, work, admm=not args.no_admm,
+                                                 compare=heavy and not args.no_compare)}
+            except (mesh.MeshError, RuntimeError) as e:  # e.g. a non-manifold mesh: recorded, the others go on
+                sizes[name] = None
+                results[name] = {"error": " ".join(str(e).split())[:300]}
+                print(f"[first-run] {name}: {results[name]['error']}", file=sys.stderr, flush=True)
         for path in map(Path, meshes):
-            if not args.no_in_process and sizes[path.stem] <= args.heavy_max_n:
+            if not args.no_in_process and sizes[path.stem] is not None and sizes[path.stem] <= args.heavy_max_n:
                 print(f"[first-run] {path.stem}: progress overhead and padding cost", file=sys.stderr, flush=True)
                 results[path.stem]["in_process"] = in_process(path, 10, [float(x) for x in args.padding.split(",")])
     meta = run_meta("bench", ["first-run", *(argv if argv is not None else sys.argv[1:])])

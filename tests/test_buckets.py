@@ -55,6 +55,9 @@ def test_padded_rows_stay_exactly_zero():
     _, dt, F, _, _ = solver._setup(W, a, 2.0, None, "uniform", None, padded)
     P, _ = _shifted_inverse(W, a, 0.5, dt, padded)
     assert P.chol.rows.shape == (padded.factor_size,) and P.width == F.W.width == padded.width
+    # the factor's entries follow the row bucket: size × (0.25 + 0.5 m) entries per row
+    per_row = padded.factor_size / padded.size
+    assert abs((per_row - 0.25) / 0.5 - round((per_row - 0.25) / 0.5)) < 2 / padded.size
     S = stiefel.GeneralizedStiefel(padded.a, 3, retraction="cholesky")
     rng = np.random.default_rng(0)
     X = jnp.asarray(padded.pad(orthonormalize(rng.standard_normal((padded.n, 3)), a)))

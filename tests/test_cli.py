@@ -349,3 +349,23 @@ def test_quiet_prints_no_progress(tmp_path: Path, capsys: pytest.CaptureFixture)
     assert main(["modes", "-k", "3", *FAST, "--no-png", "--quiet", "--out", str(tmp_path / "q")]) == 0
     captured = capsys.readouterr()
     assert captured.out == "" and captured.err == ""
+
+
+def test_a_corrupt_cache_never_crashes_a_run(tmp_path: Path) -> None:
+    """Every file of the cache (XLA executables and stored programs) overwritten with garbage: the next
+    process compiles again and gives the same modes."""
+    cache = tmp_path / "cache"
+    results = []
+    for run in ("a", "b"):
+        out = tmp_path / run
+        cmd = [sys.executable, "-m", "cli.main", "modes", "-k", "3", "--quiet", "--no-png", "--max-iters", "60",
+               "--cache-dir", str(cache), "--out", str(out)]
+        proc = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=300)
+        assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr[-2000:]
+        results.append(np.load(out / "modes.npz")["modes"])
+        if run == "a":
+            files = [p for p in cache.rglob("*") if p.is_file()]
+            assert any(p.suffix == ".jaxexport" for p in files) and len(files) >= 4
+            for p in files:
+                p.write_bytes(b"\0garbage")
+    assert np.array_equal(results[0], results[1])
