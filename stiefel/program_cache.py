@@ -145,7 +145,7 @@ def program_key(fn: Callable, args: tuple) -> str | None:
     """The store key of ``fn(*args)`` (None when a static part is not describable)."""
     try:
         text = describe(fn) + "|" + describe(args)
-    except Uncacheable:
+    except Exception:  # noqa: BLE001 — Uncacheable, or anything describe did not foresee: not stored
         return None
     h = hashlib.blake2b(digest_size=20)
     for part in (_source_digest(), _versions(), text):
@@ -223,7 +223,10 @@ def load_or_export(fn: Callable, args: tuple, out_template: Any, *, custom_calls
         STATS["exported"] += 1
     else:
         STATS["loaded"] += 1
-    compiled = jax.jit(exported.call).lower(*leaves).compile()
+    try:
+        compiled = jax.jit(exported.call).lower(*leaves).compile()
+    except Exception:  # noqa: BLE001 — the caller traces and compiles as usual (and reports real errors)
+        return None
 
     def call(*new_args):
         new_leaves = jax.tree_util.tree_leaves(eqx.filter(new_args, eqx.is_array))
