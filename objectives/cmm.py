@@ -81,6 +81,14 @@ class CMMResult:
     params: dict
     history: dict = dataclasses.field(default_factory=dict)
 
+    def __repr__(self) -> str:
+        """One line: method, status, size, objective, sparsity, iterations and times (no arrays)."""
+        n, k = np.shape(self.modes)
+        return (f"CMMResult(method={self.method!r}, status={self.status!r}, n={n}, k={k}, "
+                f"objective={self.objective:.10g}, sparsity(1e-3)={self.sparsity.get('1e-3', float('nan')):.1%}, "
+                f"orthogonality={self.orthogonality:.1e}, iterations={self.iterations}, "
+                f"solve {self.wall_time:.3f} s, compile {self.compile_time:.3f} s)")
+
 
 def unpack_laplacian(lap):
     """``(W csr, a (n,))`` from a Laplacian object (``.W``, ``.A``) or a ``(W, A)`` pair.

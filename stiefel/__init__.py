@@ -19,6 +19,11 @@ Public API (MATH.md §1–3):
 * ``as_operator``, ``shifted_inverse`` — SPD operators and preconditioners.
 * ``stiefel.sharding`` — ``row_mesh``, ``shard_rows``, ``solve_sharded``: the block solver with
   ``X`` split by rows over devices (single- or multi-host).
+* Compilation: with JAX's persistent cache on (``jax.config.update("jax_compilation_cache_dir", DIR)``),
+  ``stiefel.program_cache`` also stores ``minimize``'s traced programs (``jax.export``; only for this
+  project's own objectives), so a new process neither traces nor compiles them;
+  ``stiefel.buckets`` — the size grid on which ``objectives.BlockCMM`` pads problems so that
+  similar sizes share one program.
 * Errors: ``StiefelError`` and its subclasses (``ParameterError`` for an option out of range,
   ``NonFiniteError``, ``RankDeficientError``, ...); ``stiefel.validation`` — the checks behind them.
 

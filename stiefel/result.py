@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
@@ -55,6 +56,35 @@ class History(eqx.Module):
         )
 
 
+def _concrete(x):
+    """``x`` as a numpy value, or None when it is traced (a repr inside ``jit``/``vmap``)."""
+    if isinstance(x, jax.core.Tracer):
+        return None
+    try:
+        return np.asarray(x)
+    except Exception:  # noqa: BLE001 — anything without a concrete value
+        return None
+
+
+def _short(name: str, value, fmt: str) -> str:
+    v = _concrete(value)
+    if v is None:
+        return f"{name}=<traced>"
+    if v.ndim == 0:
+        return f"{name}={format(v.item(), fmt)}"
+    flat = v.ravel()
+    shown = ", ".join(format(x.item(), fmt) for x in flat[:4]) + (", …" if flat.size > 4 else "")
+    return f"{name}=[{shown}]"
+
+
+def _status_text(status) -> str:
+    v = _concrete(status)
+    if v is None:
+        return "<traced>"
+    names = sorted({Status.name(s) for s in np.ravel(v)})
+    return repr(names[0]) if len(names) == 1 else repr(names)
+
+
 class Result(eqx.Module):
     """Outcome of ``stiefel.minimize``.
 
@@ -76,6 +106,13 @@ class Result(eqx.Module):
     stats: dict
     wall_time: float = 0.0
     compile_time: float = 0.0
+
+    def __repr__(self) -> str:
+        """One line: status, iterations, value, gradient norm, shape and times (no arrays)."""
+        shape = "×".join(map(str, np.shape(self.x)))
+        return (f"Result(status={_status_text(self.status)}, {_short('iterations', self.iterations, 'd')}, "
+                f"{_short('value', self.value, '.10g')}, {_short('grad_norm', self.grad_norm, '.3e')}, x: {shape}, "
+                f"solve {self.wall_time:.3f} s, compile {self.compile_time:.3f} s)")
 
     @property
     def status_name(self) -> str:
@@ -122,6 +159,13 @@ class SequentialResult(eqx.Module):
     wall_time: float = 0.0
     compile_time: float = 0.0
     column_times: tuple = ()
+
+    def __repr__(self) -> str:
+        """One line: statuses, iterations, value, shape and times (no arrays)."""
+        shape = "×".join(map(str, np.shape(self.x)))
+        return (f"SequentialResult(status={_status_text(self.status)}, {_short('iterations', self.iterations, 'd')}, "
+                f"{_short('value', self.value, '.10g')}, x: {shape}, solve {self.wall_time:.3f} s, "
+                f"compile {self.compile_time:.3f} s)")
 
     @property
     def status_names(self) -> list[str]:

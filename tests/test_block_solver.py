@@ -180,3 +180,29 @@ def test_lbfgs_memory_one_is_still_a_descent_method(problem):
                    max_iters=5000, preconditioner=shifted_inverse(W, M, 0.05))
     assert res.converged, res.status_name
     assert abs(float(res.value) - target) <= 1e-9 * target
+
+
+def test_results_print_short_values_not_arrays():
+    """``repr`` of a result: status, iterations, value, gradient norm, times — one line, no arrays; also
+    batched (lists) and traced (inside ``jit``)."""
+    import jax
+    import jax.numpy as jnp
+    from stiefel.result import History, Result, SequentialResult, Status
+
+    def make(scale=1.0, lead=()):
+        z = jnp.zeros(lead)
+        return Result(x=jnp.zeros(lead + (500, 4)), value=z + 1.25 * scale, grad_norm=z + 3e-7, iterations=z.astype(int) + 17,
+                      status=z.astype(int) + Status.CONVERGED, history=History.empty(3, jnp.float64, lead), stats={},
+                      wall_time=0.5, compile_time=1.5)
+
+    text = repr(make())
+    assert text == ("Result(status='converged', iterations=17, value=1.25, grad_norm=3.000e-07, x: 500×4, "
+                    "solve 0.500 s, compile 1.500 s)")
+    assert "iterations=[17, 17, 17]" in repr(make(lead=(3,)))
+    seen = []
+    jax.jit(lambda s: seen.append(repr(make(s))) or s)(1.0)
+    assert "value=<traced>" in seen[0] and "status=<traced>" in seen[0] and "x: 500×4" in seen[0]
+    seq = SequentialResult(x=jnp.zeros((10, 2)), value=jnp.asarray(2.0), values=jnp.ones(2), grad_norm=jnp.ones(2),
+                           iterations=jnp.asarray([3, 4]), status=jnp.asarray([Status.CONVERGED, Status.MAX_ITERS]),
+                           history=History.empty(3, jnp.float64, (2,)), stats={})
+    assert repr(seq).startswith("SequentialResult(status=['converged', 'max_iters'], iterations=[3, 4], value=2")

@@ -224,3 +224,11 @@ def test_runtime_smoothing_compiles_once_for_all_smoothings(demo):
     assert second.iterations == alone.iterations
     assert abs(second.objective - alone.objective) <= 1e-9 * alone.objective
     np.testing.assert_allclose(second.modes, alone.modes, atol=1e-8)
+
+
+def test_cmm_result_prints_one_line(demo):
+    lap, _ = demo
+    r = compressed_modes(lap, 3, 0.01 * lap.n, solver=BlockCMM(max_iters=50))
+    text = repr(r)
+    assert text.startswith(f"CMMResult(method='block', status={r.status!r}, n={lap.n}, k=3, objective=")
+    assert "\n" not in text and len(text) < 300 and "array" not in text
