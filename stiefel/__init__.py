@@ -47,7 +47,7 @@ from .errors import (NonFiniteError, NotSPDError, OffManifoldError, ParameterErr
                      SolverError, StiefelError)
 from .linesearch import LineSearchResult, LineSearchStatus, along_curve, strong_wolfe
 from .manifold import GeneralizedStiefel, skew, sym
-from .operators import DenseOperator, DiagonalOperator, LinearOperator, SparseOperator, as_operator
+from .operators import DenseOperator, DiagonalOperator, IdentityOperator, LinearOperator, SparseOperator, as_operator
 from .penalty import PenaltyResult, penalty_minimize
 from .preconditioning import (
     PRECONDITIONING_MODES,

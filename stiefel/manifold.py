@@ -9,7 +9,7 @@ import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
 from .errors import OffManifoldError, ShapeError, StiefelError
-from .operators import LinearOperator, as_operator
+from .operators import IdentityOperator, LinearOperator, as_operator
 from .retractions import BLOCK_RETRACTIONS, RETRACTIONS, _inv_sqrt_spd
 from .validation import check_full_rank, is_integer
 
@@ -34,9 +34,12 @@ class GeneralizedStiefel(eqx.Module):
 
     Args:
       M: 1-D array (the diagonal of M), dense SPD ``(n, n)`` array, ``scipy.sparse``
-        SPD matrix (never densified; factored once for ``M⁻¹``), or a
-        ``stiefel.operators.LinearOperator``.
+        SPD matrix (never densified; factored once for ``M⁻¹``), a
+        ``stiefel.operators.LinearOperator``, or None: ``M = I``, the ordinary Stiefel manifold
+        ``XᵀX = I`` (``n`` optional: it is taken from the points; ``random_point``, ``dim`` and
+        ``check_point`` need it).
       k: number of columns, ``1 ≤ k ≤ n``.
+      n: the number of rows, for ``M = None`` only.
       metric: ``"euclidean"`` (``tr(Z1ᵀMZ2)``) or ``"canonical"``
         (``tr(Z1ᵀM(I − ½XXᵀM)Z2)``).
       retraction: ``"cayley"`` (low-rank, default), ``"cholesky"``, ``"polar"``;
@@ -53,11 +56,19 @@ class GeneralizedStiefel(eqx.Module):
     retraction: str = eqx.field(static=True)
 
     def __init__(self, M, k: int, *, metric: str = "euclidean", retraction: str = "cayley",
-                 check: bool = True, dtype=None):
-        op = as_operator(M, check=check, dtype=dtype)
-        n = op.n
-        if not is_integer(k) or not 1 <= int(k) <= n:
-            raise ShapeError(f"k must be an integer with 1 ≤ k ≤ n = {n}, got k = {k!r}")
+                 check: bool = True, dtype=None, n: int | None = None):
+        if M is None:
+            if n is not None and not (is_integer(n) and int(n) >= 1):
+                raise ShapeError(f"n must be a positive integer, got n = {n!r}")
+            dt = np.dtype(dtype or (jnp.float64 if jax.config.jax_enable_x64 else jnp.float32))
+            op = IdentityOperator(None if n is None else int(n), dt)
+        elif n is not None:
+            raise ShapeError("n is only for M = None (the ordinary Stiefel manifold); M gives the size otherwise")
+        else:
+            op = as_operator(M, check=check, dtype=dtype)
+        size = op.size if isinstance(op, IdentityOperator) else op.n
+        if not is_integer(k) or not 1 <= int(k) <= (size if size is not None else int(k)):
+            raise ShapeError(f"k must be an integer with 1 ≤ k ≤ n = {size}, got k = {k!r}")
         if metric not in METRICS:
             raise StiefelError(f"unknown metric {metric!r}; choose one of {METRICS}")
         if retraction not in RETRACTIONS:
@@ -85,6 +96,8 @@ class GeneralizedStiefel(eqx.Module):
 
     @property
     def dtype(self):
+        if isinstance(self.op, IdentityOperator):
+            return self.op.dtype
         return self.op.diagonal().dtype
 
     # --- geometry ----------------------------------------------------------------------------
@@ -164,8 +177,10 @@ class GeneralizedStiefel(eqx.Module):
         """Raise ``ShapeError``/``OffManifoldError`` unless ``X`` is an ``(n, k)`` point of S_M (host-side);
         ``RankDeficientError`` (an ``OffManifoldError``) names a start with dependent columns."""
         shape = tuple(np.shape(X))
-        if shape != (self.n, self.k):
-            raise ShapeError(f"{name} must have shape (n, k) = {(self.n, self.k)}, got {shape}")
+        sized = not (isinstance(self.op, IdentityOperator) and self.op.size is None)
+        if len(shape) != 2 or shape[1] != self.k or shape[0] < self.k or (sized and shape[0] != self.n):
+            want = (self.n if sized else "n ≥ k", self.k)
+            raise ShapeError(f"{name} must have shape (n, k) = {want}, got {shape}")
         Xj = jnp.asarray(X, dtype=self.dtype)
         if not bool(jnp.all(jnp.isfinite(Xj))):
             raise OffManifoldError(f"{name} has non-finite entries")

@@ -45,6 +45,7 @@ from .validation import check_finite
 __all__ = [
     "LinearOperator",
     "DiagonalOperator",
+    "IdentityOperator",
     "DenseOperator",
     "SparseOperator",
     "as_operator",
@@ -94,6 +95,33 @@ class DiagonalOperator(LinearOperator):
 
     def diagonal(self):
         return self.d
+
+
+class IdentityOperator(LinearOperator):
+    """``M = I`` (the ordinary Stiefel manifold): products and solves return their argument.
+
+    ``size`` may be None (unknown until a point is seen): then only ``n`` and ``diagonal`` — which
+    need it — raise ``ShapeError``.
+    """
+
+    size: int | None = eqx.field(static=True, default=None)
+    dtype: Any = eqx.field(static=True, default=None)
+
+    @property
+    def n(self) -> int:
+        if self.size is None:
+            raise ShapeError("this identity metric (the ordinary Stiefel manifold) was built without n; pass "
+                             "GeneralizedStiefel(None, k, n=n) to draw random points or check point shapes")
+        return self.size
+
+    def mv(self, x):
+        return x
+
+    def solve(self, y):
+        return y
+
+    def diagonal(self):
+        return jnp.ones((self.n,), dtype=self.dtype)
 
 
 class DenseOperator(LinearOperator):

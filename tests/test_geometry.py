@@ -177,3 +177,41 @@ def test_preconditioned_residual_is_descent_and_vanishes_at_critical_points(kind
     Gc = 2.0 * jnp.asarray(Wd) @ Xc
     Rc = Gc - S.op.mv(Xc) @ sym(Xc.T @ Gc)
     assert float(jnp.max(jnp.abs(preconditioned_residual(S, lambda Y: P @ Y, Xc, Rc)))) < 1e-10
+
+
+def test_ordinary_stiefel_manifold_from_none():
+    """``GeneralizedStiefel(None, k)`` is ``XᵀX = I``: the same solve as an explicit identity metric; ``n``
+    is optional and only what needs it asks for it."""
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+    import pytest
+
+    import stiefel
+    from stiefel.errors import ShapeError
+
+    n, k = 30, 3
+    A = np.diag(np.arange(1.0, n + 1))
+    N = jnp.diag(jnp.arange(k, 0, -1.0))
+
+    def brockett(X):
+        return jnp.trace(X.T @ A @ X @ N)
+
+    X0 = stiefel.GeneralizedStiefel(np.ones(n), k).random_point(jax.random.PRNGKey(1))
+    ref = stiefel.minimize(brockett, stiefel.GeneralizedStiefel(np.ones(n), k), X0, gtol=1e-10)
+    for S in (stiefel.GeneralizedStiefel(None, k), stiefel.GeneralizedStiefel(None, k, n=n)):
+        got = stiefel.minimize(brockett, S, X0, gtol=1e-10)
+        assert got.status_name == ref.status_name == "converged"
+        assert float(got.value) == pytest.approx(float(ref.value), rel=1e-12)
+        assert float(jnp.max(jnp.abs(got.x.T @ got.x - jnp.eye(k)))) <= 1e-12
+    assert float(ref.value) == pytest.approx(float(np.sum(np.arange(1.0, k + 1) * np.arange(k, 0, -1.0))), rel=1e-9)
+    sized = stiefel.GeneralizedStiefel(None, k, n=n)
+    assert sized.random_point(jax.random.PRNGKey(0)).shape == (n, k) and sized.dim == n * k - k * (k + 1) // 2
+    with pytest.raises(ShapeError, match="n=n"):
+        stiefel.GeneralizedStiefel(None, k).random_point(jax.random.PRNGKey(0))
+    with pytest.raises(ShapeError, match="k must be"):
+        stiefel.GeneralizedStiefel(None, 5, n=4)
+    with pytest.raises(ShapeError, match="only for M = None"):
+        stiefel.GeneralizedStiefel(np.ones(n), k, n=n)
+    with pytest.raises(ShapeError, match="shape"):
+        stiefel.GeneralizedStiefel(None, k).check_point(np.zeros((n, k + 1)))
