@@ -220,7 +220,7 @@ def cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir)
     run.write("npz", "modes.npz", lambda fh: np.savez_compressed(
         fh, modes=res.modes, compressed_eigenvalues=res.compressed_eigenvalues, vertices=m.vertices,
         faces=m.faces, mu=mu, diagnostics=json.dumps(to_jsonable(diag)), parameters=json.dumps(to_jsonable(params))))
-    run.write("ply", "modes.ply", lambda fh: write_ply(fh, m.vertices, m.faces, res.modes))
+    run.write("ply", "modes.ply", lambda fh: write_ply(fh, m.vertices, m.faces, res.modes, ascii=args.ascii_ply))
     picture_error = None
     if not args.no_png:
         from .render import contact_sheet

@@ -154,6 +154,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--samples", type=_positive_int, default=None,
                    help="local functions for --method fast (default: max(10k, n/10))")
     p.add_argument("--no-png", action="store_true", help="skip the PNG contact sheet")
+    p.add_argument("--ascii-ply", action="store_true", help="write modes.ply as ASCII (default: binary little-endian)")
     p.set_defaults(run=c.cmd_modes)
 
     p = sub.add_parser("eigs", help="first k Laplacian eigenpairs: npz and summary.json")

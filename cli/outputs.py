@@ -120,25 +120,35 @@ def to_jsonable(obj: Any) -> Any:
     return obj
 
 
-def write_ply(target: BinaryIO, vertices: Any, faces: Any, fields: Any, names: list[str] | None = None) -> None:
-    """ASCII PLY with one float64 vertex property per column of ``fields``, to a binary file (the CLI
-    passes a staged file of ``cli.run_dir.RunDir``, which makes the write atomic).
+def write_ply(target: BinaryIO, vertices: Any, faces: Any, fields: Any, names: list[str] | None = None,
+              *, ascii: bool = False) -> None:
+    """PLY (binary little-endian, or ASCII with ``ascii=True``) written by ``plyfile``, with one float64
+    vertex property per column of ``fields``, to a binary file (the CLI passes a staged file of
+    ``cli.run_dir.RunDir``, which makes the write atomic).
 
-    vertices: ``(n, 3)``; faces: ``(m, 3)``; fields: ``(n, k)``, written as
-    properties ``mode_0 … mode_{k-1}`` (or ``names``) after x, y, z.
+    vertices: ``(n, 3)`` (float64 x, y, z); faces: ``(m, 3)`` (``vertex_indices``, uchar count and
+    int32 indices); fields: ``(n, k)``, written as properties ``mode_0 … mode_{k-1}`` (or ``names``)
+    after x, y, z. Read them back with ``plyfile.PlyData.read(path)["vertex"]["mode_0"]`` (also
+    meshio, MeshLab, Blender).
     """
     import numpy as np
+    import plyfile
 
+    vertices = np.asarray(vertices, dtype=np.float64)
     fields = np.asarray(fields, dtype=np.float64).reshape(vertices.shape[0], -1)
     names = names or [f"mode_{j}" for j in range(fields.shape[1])]
-    header = ["ply", "format ascii 1.0", "comment stiefel-cmm compressed manifold modes",
-              f"element vertex {vertices.shape[0]}", "property double x", "property double y", "property double z"]
-    header += [f"property double {name}" for name in names]
-    header += [f"element face {faces.shape[0]}", "property list uchar int vertex_indices", "end_header"]
-    vdata = np.hstack([np.asarray(vertices, dtype=np.float64), fields])
-    target.write(("\n".join(header) + "\n").encode("ascii"))
-    np.savetxt(target, vdata, fmt="%.17g")
-    np.savetxt(target, np.hstack([np.full((faces.shape[0], 1), 3), faces]), fmt="%d")
+    vdata = np.empty(vertices.shape[0], dtype=[(c, "<f8") for c in ("x", "y", "z", *names)])
+    for j, c in enumerate("xyz"):
+        vdata[c] = vertices[:, j]
+    for j, name in enumerate(names):
+        vdata[name] = fields[:, j]
+    fdata = np.empty(len(faces), dtype=[("vertex_indices", "<i4", (3,))])
+    fdata["vertex_indices"] = np.asarray(faces, dtype=np.int64)
+    elements = [plyfile.PlyElement.describe(vdata, "vertex"),
+                plyfile.PlyElement.describe(fdata, "face", len_types={"vertex_indices": "u1"},
+                                            val_types={"vertex_indices": "i4"})]
+    plyfile.PlyData(elements, text=ascii, byte_order="<",
+                    comments=["stiefel-cmm compressed manifold modes"]).write(target)
 
 
 def stderr_line(msg: str) -> None:

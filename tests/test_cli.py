@@ -58,10 +58,23 @@ def _check_png(path: Path) -> None:
     assert np.any(rgb[:, 0] - rgb[:, 2] > 0.2) or np.any(rgb[:, 2] - rgb[:, 0] > 0.2)
 
 
-def _check_ply(path: Path, n: int, k: int) -> None:
-    header = path.read_text(encoding="ascii").split("end_header")[0]
-    assert f"element vertex {n}" in header
+def _check_ply(path: Path, n: int, k: int, fmt: str = "binary_little_endian") -> None:
+    """The PLY's header, and its fields equal to modes.npz beside it (read with plyfile and with trimesh)."""
+    import plyfile
+    import trimesh
+
+    data = path.read_bytes()
+    header = data[: data.index(b"end_header")].decode("ascii")
+    assert f"format {fmt} 1.0" in header and f"element vertex {n}" in header
     assert [f"property double mode_{j}" in header for j in range(k)] == [True] * k
+    npz = np.load(path.parent / "modes.npz")
+    ply = plyfile.PlyData.read(str(path))
+    for j in range(k):
+        assert np.array_equal(ply["vertex"][f"mode_{j}"], npz["modes"][:, j])
+    assert np.array_equal(np.stack([ply["vertex"][c] for c in "xyz"], axis=1), npz["vertices"])
+    assert np.array_equal(np.vstack(ply["face"]["vertex_indices"]), npz["faces"])
+    tm = trimesh.load(str(path), process=False)  # geometry readable by trimesh too
+    assert tm.vertices.shape == (n, 3) and np.array_equal(tm.faces, npz["faces"])
 
 
 def test_parse_mu() -> None:
@@ -369,3 +382,9 @@ def test_a_corrupt_cache_never_crashes_a_run(tmp_path: Path) -> None:
             for p in files:
                 p.write_bytes(b"\0garbage")
     assert np.array_equal(results[0], results[1])
+
+
+def test_ascii_ply_on_request(tmp_path: Path) -> None:
+    out = tmp_path / "ascii"
+    assert main(["modes", "-k", "2", "--quiet", "--no-png", "--max-iters", "30", "--ascii-ply", "--out", str(out)]) == 0
+    _check_ply(out / "modes.ply", np.load(out / "modes.npz")["vertices"].shape[0], 2, fmt="ascii")
