@@ -153,17 +153,17 @@ def _interrupt_during_write(sig: str) -> Callable[[Path], tuple[bool, str]]:
 def _disk_full(tmp: Path) -> tuple[bool, str]:
     mnt = tmp / "tinyfs"
     mnt.mkdir()
-    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(mnt)],
+    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(mnt)],
                              capture_output=True).returncode == 0 if os.geteuid() == 0 else False
     try:
         if mounted:
             out = mnt / "out"
-            first = _cli(["eigs", "--out", str(out), "-k", "3", "--quiet"], tmp)   # ~100 KB: fits
+            first = _cli(["eigs", "--out", str(out), "-k", "3", "--quiet", "--no-png"], tmp)  # ~300 KB: fits
             before = _snapshot(out)
             st = os.statvfs(mnt)  # leave 16 KiB: the second run's eigs.npz cannot fit
             (mnt / "filler").write_bytes(b"\0" * max(0, st.f_bavail * st.f_frsize - 16384))
-            p = _cli(["eigs", "--out", str(out), "-k", "6", "--seed", "1", "--quiet"], tmp)
-            how = "256 KiB tmpfs"
+            p = _cli(["eigs", "--out", str(out), "-k", "6", "--seed", "1", "--quiet", "--no-png"], tmp)
+            how = "1 MiB tmpfs"
         else:
             out, before = _baseline(tmp, "diskfull")
             first = None

@@ -303,13 +303,25 @@ def cmd_eigs(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir) 
     say(f"eigenpairs: k = {args.k}, λ = {', '.join(f'{v:.4g}' for v in evals[:6])}{' …' if args.k > 6 else ''}")
     run.write("npz", "eigs.npz", lambda fh: np.savez_compressed(fh, eigenvalues=evals, eigenvectors=evecs,
                                                                 vertices=m.vertices, faces=m.faces))
+    run.write("ply", "eigs.ply", lambda fh: write_ply(fh, m.vertices, m.faces, evecs,
+                                                      [f"eig_{j}" for j in range(args.k)], ascii=args.ascii_ply))
+    picture_error = None
+    if not args.no_png:
+        from .render import contact_sheet
+
+        titles = [f"eigenfunction {j}  λ = {lam:.4g}" for j, lam in enumerate(evals)]
+        picture_error = _picture(run, "eigs.png", lambda path: contact_sheet(path, m.vertices, m.faces, evecs,
+                                                                              titles=titles))
     summary = _summary_head(args, argv, mesh_info)
     summary.update(parameters={"k": args.k, "laplacian": _LAPLACIAN_TEXT[args.laplacian]},
                    eigenvalues=evals, diagnostics={"orthogonality": orth, "max_residual": resid},
                    timings={"compile_s": 0.0, "solve_s": t_eig, "setup_s": t_setup,
                             "write_s": time.perf_counter() - t, "total_s": time.perf_counter() - t_all})
+    if picture_error:
+        summary["picture_error"] = picture_error
     _finish(args, run, summary)
-    say(f"wrote {out / 'eigs.npz'} and {out / 'summary.json'}")
+    say(f"wrote {out / 'eigs.npz'}, {out / 'eigs.ply'}{', ' + str(out / 'eigs.png') if 'png' in run.files else ''} "
+        f"and {out / 'summary.json'}")
     return 0
 
 
@@ -428,5 +440,5 @@ def outputs_of(args: argparse.Namespace) -> tuple[tuple[str, ...], tuple[str, ..
     if args.command == "modes":
         return ("modes.npz", "modes.ply") + tuple(f"modes.{e}" for e in png), (PARTIAL, PARTIAL + PartialColumns.TMP_SUFFIX)
     if args.command == "eigs":
-        return ("eigs.npz",), ()
+        return ("eigs.npz", "eigs.ply") + tuple(f"eigs.{e}" for e in png), ()
     return ("comparison.md", "comparison.csv") + tuple(f"comparison.{e}" for e in png), ()

@@ -157,8 +157,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--ascii-ply", action="store_true", help="write modes.ply as ASCII (default: binary little-endian)")
     p.set_defaults(run=c.cmd_modes)
 
-    p = sub.add_parser("eigs", help="first k Laplacian eigenpairs: npz and summary.json")
+    p = sub.add_parser("eigs", help="first k Laplacian eigenpairs: npz, PLY, PNG, summary.json")
     _common(p, 10)
+    p.add_argument("--no-png", action="store_true", help="skip the PNG contact sheet")
+    p.add_argument("--ascii-ply", action="store_true", help="write eigs.ply as ASCII (default: binary little-endian)")
     p.set_defaults(run=c.cmd_eigs)
 
     p = sub.add_parser("compare-smoothings", help="f0…f9 from the same start: markdown table, CSV and a figure")

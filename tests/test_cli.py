@@ -145,6 +145,11 @@ def test_modes_hand_json_quiet(tmp_path: Path, capsys: pytest.CaptureFixture) ->
     z = np.load(tmp_path / "eigs" / "eigs.npz")
     assert abs(z["eigenvalues"][0]) < 1e-8 and np.all(np.diff(z["eigenvalues"]) > 0)
     assert _a_orthonormality(z["eigenvectors"], HAND) < 1e-10
+    import plyfile  # eigs writes the eigenfunctions as PLY fields and a contact sheet too
+
+    ply = plyfile.PlyData.read(str(tmp_path / "eigs" / "eigs.ply"))
+    assert [np.array_equal(ply["vertex"][f"eig_{j}"], z["eigenvectors"][:, j]) for j in range(3)] == [True] * 3
+    _check_png(tmp_path / "eigs" / "eigs.png")
 
 
 @needs_hand
