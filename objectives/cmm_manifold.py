@@ -131,9 +131,9 @@ def _shifted_inverse(W, a, sigma: float, dtype, padded: PaddedProblem | None = N
     t0 = time.perf_counter()
     if padded is None:
         P = stiefel.as_operator(W + sp.diags_array(sigma * a), dtype=dtype)
-    else:
-        P = SparseOperator.from_scipy(padded.W + sp.diags_array(sigma * padded.a), factor=True, dtype=dtype,
-                                      width=padded.width, factor_size=padded.factor_size)
+    else:  # checked as the unpadded one is (symmetry, positive diagonal)
+        P = stiefel.as_operator(padded.W + sp.diags_array(sigma * padded.a), dtype=dtype, width=padded.width,
+                                factor_size=padded.factor_size)
     return P, time.perf_counter() - t0
 
 

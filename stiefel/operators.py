@@ -322,7 +322,8 @@ def _check_symmetric(asym: float, scale: float, what: str) -> None:
         raise NotSPDError(f"{what} is not symmetric: max|M − Mᵀ| = {asym:.3e} (max|M| = {scale:.3e})")
 
 
-def as_operator(M, *, check: bool = True, factor: bool = True, dtype=None) -> LinearOperator:
+def as_operator(M, *, check: bool = True, factor: bool = True, dtype=None, width: int | None = None,
+                factor_size: int | None = None) -> LinearOperator:
     """Wrap ``M`` as a ``LinearOperator``.
 
     Args:
@@ -334,6 +335,8 @@ def as_operator(M, *, check: bool = True, factor: bool = True, dtype=None) -> Li
         entries are refused whatever ``check`` (``NonFiniteError``; O(nnz)).
       factor: for sparse M, factor it once so that ``solve`` works.
       dtype: floating dtype of the stored values (default: float64 if x64 is on).
+      width, factor_size: for sparse M, lower bounds of the stored shapes (``SparseOperator.from_scipy``;
+        size buckets, ``stiefel.buckets``).
     """
     if isinstance(M, LinearOperator):
         return M
@@ -357,7 +360,7 @@ def as_operator(M, *, check: bool = True, factor: bool = True, dtype=None) -> Li
                 raise NotSPDError("M is not positive definite: it has a non-positive diagonal entry")
             if not factor:
                 SymmetricFactor(csr)
-        return SparseOperator.from_scipy(csr, factor=factor, dtype=dtype)
+        return SparseOperator.from_scipy(csr, factor=factor, dtype=dtype, width=width, factor_size=factor_size)
     arr = np.asarray(M, dtype=np.float64)
     check_finite("M", arr)
     if arr.ndim == 1:

@@ -127,3 +127,16 @@ def test_meshes_of_one_bucket_share_the_compiled_solver(tmp_path):
         out.append([int(v) for v in p.stdout.split()])
     assert out[0][0] == out[1][0] == bucket(441, 1.2)
     assert out[0][1] == 0 and out[0][2] == 0 and out[1][1] >= 2 and out[1][2] == 2
+
+
+@pytest.mark.parametrize("growth", [None, 1.5])
+def test_padded_preconditioner_is_checked_like_the_unpadded_one(growth):
+    """``W + σA`` is validated before padding too: a non-symmetric W is a named error."""
+    from stiefel.errors import NotSPDError
+
+    W, a = _grid(6)
+    W = W.tolil()
+    W[0, 1] += 0.5
+    with pytest.raises(NotSPDError, match="not symmetric"):
+        compressed_modes((sp.csr_array(W), a), 2, 1.0, start="random",
+                         solver=BlockCMM(bucket_growth=growth, preconditioner_shift=1.0))
