@@ -1,7 +1,7 @@
 """Demo of the manifold layer: the first k generalised eigenpairs of a grid Laplacian.
 
 Run ``python -m cli.grid_demo [--grid 60] [-k 10]``. It minimises ``xᵀWx`` column by
-column on ``{ΦᵀMx = 0, xᵀMx = 1}`` (thesis Algorithm 6 with μ = 0, MATH.md §2) and
+column on ``{ΦᵀMx = 0, xᵀMx = 1}`` (thesis Algorithm 6 with μ = 0, docs/maths.md §2) and
 compares with ``scipy.sparse.linalg.eigsh``; then runs the block solver on
 ``tr(XᵀWX)``. ``W`` is the graph Laplacian of an m×m grid, ``M`` a random
 positive diagonal.

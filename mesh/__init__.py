@@ -1,4 +1,4 @@
-"""Triangle meshes and their discrete Laplacians (thesis §2.5, §4.1, §7.1; MATH.md §6–8).
+"""Triangle meshes and their discrete Laplacians (thesis §2.5, §4.1, §7.1; docs/maths.md §6–8).
 
 The mesh layer knows nothing of optimisation. Public API:
 
@@ -15,6 +15,8 @@ The mesh layer knows nothing of optimisation. Public API:
   scipy CSR and as JAX operators (``lap.W_op``, ``lap.A_op``); ``robust_laplacian(m)``.
 * ``laplacian_jax(V, F, area=, normalize_area=True) -> (W, A)`` — the cotangent pair as BCOO,
   differentiable in ``V`` and jittable; ``mass_diagonal_jax``, ``weight_operator_jax``.
+* ``example(name)`` — generated example surfaces (``bumpy``, ``starfish``, ``torus``, ``patch``;
+  ``mesh.examples``), so examples run without any mesh file; ``example_arrays(name)`` gives ``(V, F)``.
 * ``eigenbasis(lap, k) -> Eigenbasis(evals (k,), evecs (n, k))`` — ``Wφ = λAφ``, A-orthonormal.
 * Descriptors (§4.1): ``geodesic_distance``, ``geodists``, ``deltas``, ``normdist``,
   ``hks``, ``wks``, ``constant``, ``vertex_positions``, ``extremal_points``,
@@ -47,6 +49,7 @@ from .descriptors import (
     wks_energies,
 )
 from .eigen import Eigenbasis, eigenbasis
+from .examples import EXAMPLES, ExampleError, example, example_arrays
 from .errors import (
     DegenerateMeshError,
     EmptyMeshError,
@@ -92,6 +95,10 @@ __all__ = [
     "deltas",
     "edge_graph",
     "eigenbasis",
+    "EXAMPLES",
+    "ExampleError",
+    "example",
+    "example_arrays",
     "extremal_points",
     "face_areas",
     "geodesic_distance",

@@ -1,4 +1,4 @@
-"""Descriptor functions on meshes (thesis §4.1, MATH.md §8).
+"""Descriptor functions on meshes (thesis §4.1, docs/maths.md §8).
 
 Point-based functions (Def. 4.1.1) at landmarks — geodesic distance
 (GEODISTS), DELTAS, NORMDIST — the multi-scale HKS and WKS, CONSTANT and VERTS,

@@ -25,6 +25,7 @@ import scipy.sparse.linalg as spla
 from jaxtyping import Float
 
 from stiefel.driver import Progress
+from stiefel.signs import canonical_signs
 from stiefel.sparse_factor import SymmetricFactor
 from stiefel.validation import check_finite, check_number, is_integer
 
@@ -155,9 +156,4 @@ def eigenbasis(
     gram = 0.5 * (gram + gram.T)
     C = sla.cholesky(gram, lower=False)
     evecs = sla.solve_triangular(C, evecs.T, trans="T", lower=False).T
-    # deterministic, permutation-equivariant sign
-    idx = np.argmax(np.abs(evecs), axis=0)
-    signs = np.sign(evecs[idx, np.arange(k)])
-    signs[signs == 0] = 1.0
-    evecs = evecs * signs
-    return Eigenbasis(evals=evals, evecs=evecs)
+    return Eigenbasis(evals=evals, evecs=canonical_signs(evecs))  # the largest-magnitude entry of each column is positive

@@ -128,7 +128,7 @@ def load(
         its longest edge (plus round-off of its coordinates; ``cleaning.py``).
 
     Returns:
-      a ``Mesh``; ``mesh.report.lines()`` says what changed.
+      a ``Mesh``; ``Mesh.report.lines()`` says what changed.
 
     Raises:
       MeshFormatError (bad file: message starts ``path:line:``),

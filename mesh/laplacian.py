@@ -1,4 +1,4 @@
-"""Discrete Laplace–Beltrami operators ``L = A⁻¹W`` (thesis §2.5, MATH.md §7).
+"""Discrete Laplace–Beltrami operators ``L = A⁻¹W`` (thesis §2.5, docs/maths.md §7).
 
 A ``Laplacian`` holds the weight matrix ``W`` (Ex. 2.5.22) and the area matrix
 ``A`` (Ex. 2.5.17) as ``scipy.sparse`` CSR matrices and, built on first use,
@@ -164,7 +164,7 @@ def cotangent_weights(m: Mesh) -> sp.csr_array:
 
 
 def _adjacency(m: Mesh) -> sp.csr_array:
-    """``Adj(N)`` (Def. 2.5.10 with erratum 8): 1 where vertices share an edge, else 0."""
+    """``Adj(N)`` (Def. 2.5.10 with docs/maths.md note 8): 1 where vertices share an edge, else 0."""
     e = edges_of(m.faces)
     n = m.n_vertices
     return _assemble(

@@ -1,4 +1,4 @@
-"""Differentiable JAX assembly of the cotangent Laplacian pair ``(W, A)`` (thesis §2.5, MATH.md §7).
+"""Differentiable JAX assembly of the cotangent Laplacian pair ``(W, A)`` (thesis §2.5, docs/maths.md §7).
 
 ``laplacian_jax(V, F, area)`` returns the matrices of ``mesh.laplacian(m, weights="cotangent",
 area=area)`` as ``jax.experimental.sparse.BCOO``, with values that are a jittable, differentiable

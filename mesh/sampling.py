@@ -1,4 +1,4 @@
-"""Poisson-disk vertex sampling and the local-function matrix ``U`` (thesis §7.1, MATH.md §6).
+"""Poisson-disk vertex sampling and the local-function matrix ``U`` (thesis §7.1, docs/maths.md §6).
 
 ``poisson_disk_sample`` picks vertices in random order, accepting a vertex
 when no accepted sample lies within distance ``radius`` (Dijkstra along edges,
@@ -6,7 +6,7 @@ cut off at ``radius``): the result is a maximal ``radius``-separated set, so
 every vertex is within ``radius`` of a sample.
 
 ``local_functions`` builds ``U`` (n × d, sparse): columns are the bumps
-``ũ_i(v) = (2/ρ³) r³ − (3/ρ²) r² + 1`` for ``r ≤ ρ`` (eq. 7.1.1 with erratum 3),
+``ũ_i(v) = (2/ρ³) r³ − (3/ρ²) r² + 1`` for ``r ≤ ρ`` (eq. 7.1.1 with docs/maths.md note 3),
 rows normalised to sum to 1 (a partition of unity).
 """
 
@@ -86,7 +86,7 @@ def poisson_disk_sample(
 
 
 def bump(r: Float[np.ndarray, "..."], rho: float) -> Float[np.ndarray, "..."]:
-    """``ũ(r) = (2/ρ³) r³ − (3/ρ²) r² + 1`` for ``0 ≤ r ≤ ρ``, else 0 (eq. 7.1.1, erratum 3)."""
+    """``ũ(r) = (2/ρ³) r³ − (3/ρ²) r² + 1`` for ``0 ≤ r ≤ ρ``, else 0 (eq. 7.1.1, docs/maths.md note 3)."""
     r = np.asarray(r, dtype=np.float64)
     t = r / rho
     return np.where(r <= rho, 2.0 * t**3 - 3.0 * t**2 + 1.0, 0.0)

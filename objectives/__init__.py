@@ -1,4 +1,4 @@
-"""Objectives for optimisation on generalised Stiefel manifolds (MATH.md §4).
+"""Objectives for optimisation on generalised Stiefel manifolds (docs/maths.md §4).
 
 * ``objectives.smoothings`` — the ten ℓ1 smoothings of thesis Table 6.1
   (``f0 … f9``, ``get``, ``info``, ``NAMES``).

@@ -6,7 +6,7 @@ The smoothed energy ``F(X) = tr(XᵀWX) + μ Σ_ij w_i s(X_ij)`` has Euclidean H
 entries of ``W``; the shifted preconditioner ``(W + σA)⁻¹`` ignores it, which is
 why the block solver needed hundreds of iterations where the modes are sparse.
 
-Per column j this module uses instead (MATH.md §4 notation)
+Per column j this module uses instead (docs/maths.md §4 notation)
 
     P_j = (W + σA + diag(c ∘ 1[pinned_j]))⁻¹,   c_i = μ w_i / (2δ),
 

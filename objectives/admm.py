@@ -1,4 +1,4 @@
-"""ADMM for compressed manifold modes — the baseline (thesis Algorithm 3, §3.2.2; MATH.md §5).
+"""ADMM for compressed manifold modes — the baseline (thesis Algorithm 3, §3.2.2; docs/maths.md §5).
 
 Minimise ``tr(ΨᵀWΨ) + μ Σ_ij w_i |Ψ_ij|`` subject to ``ΨᵀAΨ = I`` by splitting
 ``Ψ`` (orthonormality), ``E`` (Dirichlet) and ``S`` (ℓ1) with scaled duals
@@ -135,7 +135,7 @@ class RhoRule:
 
 
 def l1_weights_np(area_diag: np.ndarray, weighting: str) -> np.ndarray:
-    """ℓ1 weights: ``A_ii`` (``"area"``) or ``1/n`` (``"uniform"``) (MATH.md §4)."""
+    """ℓ1 weights: ``A_ii`` (``"area"``) or ``1/n`` (``"uniform"``) (docs/maths.md §4)."""
     if weighting == "area":
         return np.asarray(area_diag, dtype=np.float64)
     if weighting == "uniform":

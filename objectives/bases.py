@@ -1,4 +1,4 @@
-"""Bases from generalised eigenproblems: GLMHs, LMHs, Hamiltonian eigenfunctions (thesis §3.1, §3.3; MATH.md §4).
+"""Bases from generalised eigenproblems: GLMHs, LMHs, Hamiltonian eigenfunctions (thesis §3.1, §3.3; docs/maths.md §4).
 
 Generalised localised manifold harmonics (Def. 3.3.1 with ``μ_f = 0``, Thm. 3.3.7,
 Def. 3.3.9) are the ``k`` smallest generalised eigenpairs of ``(sym(Q), M)``::
@@ -7,7 +7,7 @@ Def. 3.3.9) are the ``k`` smallest generalised eigenpairs of ``(sym(Q), M)``::
 
 covering Laplacian eigenfunctions (``μ_V = μ_⊥ = 0``), LMHs (eq. 3.1.5, ``V = v`` the
 region penalty of eq. 3.1.2) and Hamiltonian eigenfunctions (eq. 3.1.9 with the
-constraint ``ΨᵀAΨ = I``, MATH.md erratum 7).
+constraint ``ΨᵀAΨ = I``, docs/maths.md note 7).
 
 The rank-``r`` term ``μ_⊥ BBᵀ`` (``B = AΦ``, ``n × r``) is never formed: ``Q`` is a
 ``LinearOperator`` and shift-invert Lanczos (``eigsh``) applies
@@ -28,6 +28,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from stiefel.errors import ShapeError
+from stiefel.signs import canonical_signs
 from stiefel.sparse_factor import SymmetricFactor
 from stiefel.validation import (check_count, check_finite, check_nonnegative, check_number, check_unit_interval)
 
@@ -94,7 +95,7 @@ def glmh(W, A, k: int, *, mu_V: float = 0.0, V=None, mu_perp: float = 0.0, Phi=N
          sigma: float | None = None, tol: float = 0.0, seed: int = 0) -> BasisResult:
     """Generalised localised manifold harmonics (Def. 3.3.9; Thm. 3.3.7): smallest ``k`` eigenpairs of ``(sym(Q), M)``.
 
-    ``Q = W + μ_V A diag(V) + μ_⊥ AΦΦᵀA`` (MATH.md §4). The rank-``r`` term is applied as a
+    ``Q = W + μ_V A diag(V) + μ_⊥ AΦΦᵀA`` (docs/maths.md §4). The rank-``r`` term is applied as a
     matvec and inverted by Woodbury; no dense ``n × n`` matrix is formed.
 
     Args:
@@ -171,10 +172,7 @@ def glmh(W, A, k: int, *, mu_V: float = 0.0, V=None, mu_perp: float = 0.0, Phi=N
     gram = Psi.T @ (M @ Psi)
     R = sla.cholesky(0.5 * (gram + gram.T), lower=False)
     Psi = sla.solve_triangular(R, Psi.T, trans="T", lower=False).T
-    idx = np.argmax(np.abs(Psi), axis=0)
-    signs = np.sign(Psi[idx, np.arange(k)])
-    signs[signs == 0] = 1.0
-    return BasisResult(evals=evals, Psi=Psi * signs)
+    return BasisResult(evals=evals, Psi=canonical_signs(Psi))  # the largest-magnitude entry of each column is positive
 
 
 def lmh(W, A, k: int, Phi_k, mu_perp: float, *, v=None, mu_R: float = 0.0, **kwargs) -> BasisResult:

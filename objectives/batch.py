@@ -1,6 +1,6 @@
 """Batches of compressed-manifold-mode solves on one mesh: ``jax.vmap`` over μ, ε/δ and starts.
 
-``cmm_batch(lap, k, mus, ...)`` minimises the smoothed CMM energy (MATH.md §4, thesis
+``cmm_batch(lap, k, mus, ...)`` minimises the smoothed CMM energy (docs/maths.md §4, thesis
 Def. 3.2.10) ``tr(XᵀWX) + μ_b Σ_ij w_i s_{ε_b,δ_b}(X_ij)`` over ``XᵀAX = I`` for a batch
 ``b = 1..B`` of parameters and starts, with ``stiefel.solve_block`` (Riemannian CG) under
 ``jax.vmap``: one compiled program, one ``lax.while_loop`` that runs until every member has
@@ -38,6 +38,7 @@ from jaxtyping import Array, ArrayLike, Float
 import stiefel
 from stiefel.errors import ParameterError, ShapeError
 from stiefel.operators import SparseOperator
+from stiefel.signs import canonical_signs
 from stiefel.validation import check_count, check_finite, check_full_rank, check_number, check_positive
 
 from .cmm import first_eigenpairs, unpack_laplacian
@@ -59,7 +60,7 @@ def default_options(**overrides) -> stiefel.BlockOptions:
 class BatchResult:
     """Stacked outcome of ``cmm_batch`` (batch size B).
 
-    modes: ``(B, n, k)`` final iterates (not re-sorted, not re-orthonormalised).
+    modes: ``(B, n, k)`` final iterates (not re-sorted, not re-orthonormalised; signs as ``stiefel.signs``).
     value: ``(B,)`` smoothed objective; objective: ``(B,)`` true objective (f0 = |·|).
     iterations, status: ``(B,)`` ints (``stiefel.Status`` codes); orthogonality: ``(B,)``
     ``max|XᵀAX − I|``. wall_time: run seconds (compile excluded); compile_time: seconds;
@@ -239,6 +240,7 @@ def cmm_batch(
         for j, i in enumerate(idx):
             outs[i] = [np.asarray(o[j]) for o in group]
     X, value, true, it, status, orth = (np.stack([o[m] for o in outs]) for m in range(6))
+    X = np.stack([canonical_signs(x) for x in X])  # each column's largest-magnitude entry positive (stiefel.signs)
     return BatchResult(modes=X, value=value, objective=true, iterations=it, status=status, orthogonality=orth,
                        wall_time=wall, compile_time=compile_t, mode=mode,
                        params={"mu": mus_b.copy(), "eps": eps_b.copy(), "delta": delta_b.copy(),

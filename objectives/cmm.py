@@ -1,4 +1,4 @@
-"""Compressed manifold modes (thesis Def. 3.2.10, §3.2, §6.5; MATH.md §4–5).
+"""Compressed manifold modes (thesis Def. 3.2.10, §3.2, §6.5; docs/maths.md §4–5).
 
 ``compressed_modes(lap, k, mu, solver=BlockCMM())`` minimises
 ``tr(ΨᵀWΨ) + μ Σ_ij w_i |Ψ_ij|`` over ``ΨᵀAΨ = I`` and returns the modes with
@@ -35,6 +35,7 @@ import scipy.sparse.linalg as spla
 
 from stiefel.driver import Progress
 from stiefel.errors import NotSPDError, ParameterError, ShapeError
+from stiefel.signs import canonical_signs
 from stiefel.sparse_factor import SymmetricFactor
 from stiefel.validation import (check_count, check_finite, check_full_rank, check_nonnegative, check_number,
                                 check_positive, check_unit_interval)
@@ -157,9 +158,7 @@ def first_eigenpairs(W, a, k):
         vals, vecs = spla.eigsh(sp.csc_array(W), k=k, M=A, sigma=sigma, which="LM", v0=v0, OPinv=OPinv)
     order = np.argsort(vals)
     vals, vecs = vals[order], vecs[:, order]
-    peak = vecs[np.argmax(np.abs(vecs), axis=0), np.arange(vecs.shape[1])]
-    vecs = vecs * np.sign(peak)  # sign convention: each column's largest-magnitude entry is positive
-    return vals, orthonormalize(vecs, a)
+    return vals, canonical_signs(orthonormalize(vecs, a))  # each column's largest-magnitude entry is positive
 
 
 def _diagnostics(W, a, mu, weighting, Psi):
@@ -168,7 +167,7 @@ def _diagnostics(W, a, mu, weighting, Psi):
     l1_cols = mu * np.sum(w[:, None] * np.abs(Psi), axis=0)
     lam = dir_parts + 0.5 * l1_cols  # Def. 3.2.15: ψᵀWψ + (μ/2)‖·‖₁
     order = np.argsort(lam, kind="stable")
-    Psi = Psi[:, order]
+    Psi = canonical_signs(Psi[:, order])  # the sign convention (stiefel.signs): largest-magnitude entry positive
     peak = np.max(np.abs(Psi), axis=0, keepdims=True)
     sparsity = {"1e-6": float(np.mean(np.abs(Psi) < 1e-6 * peak)), "1e-3": float(np.mean(np.abs(Psi) < 1e-3 * peak))}
     orth = float(np.max(np.abs(Psi.T @ (a[:, None] * Psi) - np.eye(Psi.shape[1]))))
@@ -217,7 +216,7 @@ def compressed_modes(
       k: number of modes, an integer in ``[1, n]``; mu: sparsity weight μ ≥ 0 (absolute).
       solver: ``BlockCMM`` (default), ``SequentialCMM``, ``ADMMCMM``, ``SequentialADMMCMM`` or
         ``FastCMM(U)`` (``objectives.cmm_solvers``), with its options.
-      weighting: ``"area"`` or ``"uniform"`` ℓ1 weights (MATH.md §4).
+      weighting: ``"area"`` or ``"uniform"`` ℓ1 weights (docs/maths.md §4).
       start: ``"eigen"`` (first k eigenfunctions; ``FastCMM``: the restricted eigenbasis),
         ``"random"`` (``seed``), or an ``(n, k)`` array (not for ``FastCMM``). The eigenpairs are
         computed only when the start or the solver (default shift σ, ADMM's ρ) uses them, once.

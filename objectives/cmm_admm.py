@@ -1,4 +1,4 @@
-"""The ADMM CMM solvers (thesis Algorithms 3 and 8; MATH.md §5–6): ``ADMMCMM`` (exact or thesis form),
+"""The ADMM CMM solvers (thesis Algorithms 3 and 8; docs/maths.md §5–6): ``ADMMCMM`` (exact or thesis form),
 ``SequentialADMMCMM`` and ``FastCMM`` (restricted to local functions). Host numpy/scipy, float64."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The manifold CMM solvers (thesis §6.5, Algorithm 6; MATH.md §4): ``BlockCMM`` and ``SequentialCMM``.
+"""The manifold CMM solvers (thesis §6.5, Algorithm 6; docs/maths.md §4): ``BlockCMM`` and ``SequentialCMM``.
 
 Both minimise the smoothed energy ``tr(XᵀWX) + μ Σ_ij w_i s_{ε,δ}(X_ij)`` on ``XᵀAX = I``
 (``objectives.energies.cmm_energy``), with ε and δ driven to their targets in ``continuation``

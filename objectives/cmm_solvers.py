@@ -1,4 +1,4 @@
-"""One immutable solver object per CMM method (thesis §3.2, §6.5, Ch. 7; MATH.md §4–6).
+"""One immutable solver object per CMM method (thesis §3.2, §6.5, Ch. 7; docs/maths.md §4–6).
 
 ``compressed_modes(lap, k, mu, solver=...)`` (``objectives.cmm``) minimises
 ``tr(ΨᵀWΨ) + μ Σ_ij w_i |Ψ_ij|`` over ``ΨᵀAΨ = I`` with one of:

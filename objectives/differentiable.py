@@ -1,12 +1,12 @@
 """Differentiable compressed manifold modes: a CMM solve inside a larger JAX program.
 
-``cmm_solve(W, area, X0, mu, ...)`` minimises the smoothed CMM energy (MATH.md §4)
+``cmm_solve(W, area, X0, mu, ...)`` minimises the smoothed CMM energy (docs/maths.md §4)
 
     ``F(Ψ) = tr(ΨᵀWΨ) + μ Σ_ij w_i s_ε,δ(Ψ_ij)``  over  ``ΨᵀAΨ = I``
 
 with ``stiefel.minimize`` and returns the modes as a JAX array whose derivatives with respect
 to μ, ε/δ, the per-vertex ℓ1 weights ``w``, the values of W and the mass diagonal ``area`` come
-from the implicit function theorem (``stiefel.RiemannianImplicitAdjoint``, MATH.md §9) — no
+from the implicit function theorem (``stiefel.RiemannianImplicitAdjoint``, docs/maths.md §9) — no
 iteration is unrolled. Everything may be traced: call it inside ``jax.grad``/``jax.jvp``.
 
 Derivatives are those of the *smoothed* problem at a point where its Riemannian gradient
@@ -28,6 +28,7 @@ from jax.experimental import sparse as jsparse
 from jaxtyping import Array, Float
 
 import stiefel
+from stiefel.signs import canonical_signs
 from stiefel.validation import check_count, check_nonnegative, check_positive
 
 from .energies import CMMEnergy, l1_weights
@@ -111,8 +112,8 @@ def cmm_solve(
       throw: raise on a failed solve / on a derivative through a non-converged last stage.
 
     Returns:
-      ``(Ψ, result)``: the modes ``(n, k)`` (unsorted; differentiable) and the last stage's
-      ``stiefel.Result``.
+      ``(Ψ, result)``: the modes ``(n, k)`` (unsorted; differentiable; each column's largest-magnitude
+      entry positive, ``stiefel.signs``) and the last stage's ``stiefel.Result``.
     """
     _smoothings.info(smoothing)  # validates the name
     max_iters = check_count("max_iters", max_iters)
@@ -147,4 +148,4 @@ def cmm_solve(
     res = stiefel.minimize(energy, S, X, method=method, gtol=gtol, max_iters=max_iters,
                            budget=max_iters - used if stages else None, preconditioner=preconditioner, check=False,
                            throw=throw)
-    return res.x, res
+    return canonical_signs(res.x), res  # the sign convention (stiefel.signs); res.x keeps the solver's signs

@@ -1,6 +1,6 @@
 """Objective building blocks: Dirichlet energy, weighted ℓ1 terms, the CMM energy.
 
-MATH.md §4; thesis Def. 3.2.10 (compressed manifold modes) and Def. 3.2.15
+docs/maths.md §4; thesis Def. 3.2.10 (compressed manifold modes) and Def. 3.2.15
 (compressed eigenvalue). Everything is pure JAX: operators are anything with
 ``.mv(X)`` (``stiefel.operators.SparseOperator``, ``DiagonalOperator``, …); a
 ``scipy.sparse`` matrix is wrapped with ``SparseOperator.from_scipy`` (never
@@ -11,7 +11,7 @@ Shapes: ``X`` is ``(n, k)`` (a block of k functions on n vertices) or ``(n,)``
 ``F(X) == Σ_j F(X[:, j])`` (the column-separable part used by the sequential
 solver, thesis §6.4).
 
-ℓ1 weightings (MATH.md §4, both are in the literature):
+ℓ1 weightings (docs/maths.md §4, both are in the literature):
 
 * ``"area"``:    ``w_i = A_ii``  → ``μ Σ_ij A_ii s(X_ij)`` = ``μ‖AX‖₁`` (the thesis);
 * ``"uniform"``: ``w_i = 1/n``   → ``(μ/n) Σ_ij s(X_ij)`` (Neumann et al. 2014).
@@ -86,7 +86,7 @@ def _rows(w: Float[Array, " n"], X: Array) -> Array:
 
 
 def dirichlet(W) -> Callable[[Float[Array, "n *k"]], Float[Array, ""]]:
-    """The Dirichlet energy ``X ↦ tr(XᵀWX)`` (MATH.md §4; ``xᵀWx`` for a column).
+    """The Dirichlet energy ``X ↦ tr(XᵀWX)`` (docs/maths.md §4; ``xᵀWx`` for a column).
 
     Args:
       W: the ``(n, n)`` weight (stiffness) matrix, an operator with ``.mv``
@@ -105,7 +105,7 @@ def dirichlet(W) -> Callable[[Float[Array, "n *k"]], Float[Array, ""]]:
 
 
 def l1_weights(area_diag: Float[ArrayLike, " n"], weighting: Weighting = "area") -> Float[Array, " n"]:
-    """Row weights ``w`` of the ℓ1 term: ``A_ii`` (``"area"``) or ``1/n`` (``"uniform"``), MATH.md §4."""
+    """Row weights ``w`` of the ℓ1 term: ``A_ii`` (``"area"``) or ``1/n`` (``"uniform"``), docs/maths.md §4."""
     d = _as_diag(area_diag)
     if weighting == "area":
         return d
@@ -260,7 +260,7 @@ def cmm_energy(
     weighting: Weighting = "area",
     runtime_smoothing: bool = False,
 ) -> CMMEnergy:
-    """Build the smoothed CMM energy ``tr(XᵀWX) + μ Σ_ij w_i s(X_ij)`` (MATH.md §4).
+    """Build the smoothed CMM energy ``tr(XᵀWX) + μ Σ_ij w_i s(X_ij)`` (docs/maths.md §4).
 
     Args:
       W: ``(n, n)`` weight matrix (operator with ``.mv``, ``scipy.sparse`` or dense).

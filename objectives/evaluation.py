@@ -1,4 +1,4 @@
-"""Evaluating bases: reconstruction, reconstruction error, principal angles, Grassmannian distance (thesis Ch. 4; MATH.md §8).
+"""Evaluating bases: reconstruction, reconstruction error, principal angles, Grassmannian distance (thesis Ch. 4; docs/maths.md §8).
 
 * Reconstruction of ``F (n, f)`` in a basis ``B (n, k)`` (§4.2): least squares
   ``coeffs = (BᵀB)⁻¹BᵀF`` (computed by ``lstsq``, eq. 4.2.2) or "matrix manipulation"

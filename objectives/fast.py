@@ -1,4 +1,4 @@
-"""Fast approximation by restriction to local functions (thesis Chapter 7, Algorithms 7–8; MATH.md §6).
+"""Fast approximation by restriction to local functions (thesis Chapter 7, Algorithms 7–8; docs/maths.md §6).
 
 With a row-normalised local-function matrix ``U`` (n × d, sparse; from
 ``mesh.local_functions``) every function is sought as ``UX`` for ``X ∈ R^{d×k}``:
@@ -8,7 +8,7 @@ With a row-normalised local-function matrix ``U`` (n × d, sparse; from
   M-orthonormal (Lemma 7.1.2) and their energies ``φ̄ᵀQ̄φ̄`` equal the restricted
   eigenvalues (Lemma 7.1.3). ``Q`` may be sparse, or carry the GLMH low-rank term.
 * Algorithm 8 — ``restricted_admm``: ADMM on the restricted CMM problem (7.3.5) in
-  the exact A-weighted form (with the corrections of MATH.md erratum 4):
+  the exact A-weighted form (with the corrections of docs/maths.md note 4):
   ``X, E ∈ R^{d×k}``, ``S, U^S ∈ R^{n×k}``, ``U^E ∈ R^{d×k}``.
 
   X-step: maximise ``tr(XᵀB)``, ``B = Ā(E − U^E) + UᵀA(S − U^S)``, over ``XᵀĀX = I``:

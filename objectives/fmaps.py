@@ -1,4 +1,4 @@
-"""Functional maps between meshes (thesis §5.1–5.2; MATH.md §8).
+"""Functional maps between meshes (thesis §5.1–5.2; docs/maths.md §8).
 
 Convention (differs from the thesis by a transpose): ``C`` is ``(k_tgt, k_src)`` and maps
 source coefficients to target coefficients, ``b ≈ C a``. The thesis writes ``B ≈ CᵀA``
@@ -16,7 +16,7 @@ source coefficients to target coefficients, ``b ≈ C a``. The thesis writes ``B
 * ``p2p_from_fmap`` — nearest neighbours in coefficient space (§5.1.4, cKDTree).
 * ``icp_refine`` — alternate p2p extraction and orthogonal Procrustes (§5.1.5).
 * Errors (§5.2): ``err_s`` (5.2.23), ``err_t`` (5.2.24), ``err_gd`` (5.2.26, the mean:
-  MATH.md erratum 9), ``orthogonality_error`` ``‖CᵀC − I‖_F`` and
+  docs/maths.md note 9), ``orthogonality_error`` ``‖CᵀC − I‖_F`` and
   ``c_orthogonality_error`` ``‖D − Cᵀ‖_F`` (Def. 5.2.5).
 """
 
@@ -51,7 +51,7 @@ class FmapShapeError(ValueError):
 
 
 class TooFewFunctionsError(ValueError):
-    """Fewer corresponding functions than source basis vectors (f < k): C is not determined (MATH.md erratum 10)."""
+    """Fewer corresponding functions than source basis vectors (f < k): C is not determined (docs/maths.md note 10)."""
 
 
 def _check_basis_and_functions(B, F, A, side):
@@ -87,7 +87,7 @@ def functional_map(B_src, B_tgt, F_src, F_tgt, A_src, A_tgt, *, evals_src=None, 
     Returns:
       ``C (k_tgt, k_src)``.
     Raises:
-      TooFewFunctionsError: ``f < k_src`` (MATH.md erratum 10).
+      TooFewFunctionsError: ``f < k_src`` (docs/maths.md note 10).
       FmapShapeError: inconsistent shapes.
     Warns:
       RankDeficientWarning: ``f ≥ k_src`` but the source coefficients have rank < k_src
@@ -101,7 +101,7 @@ def functional_map(B_src, B_tgt, F_src, F_tgt, A_src, A_tgt, *, evals_src=None, 
     k_src, k_tgt, f = B_src.shape[1], B_tgt.shape[1], F_src.shape[1]
     if f < k_src:
         raise TooFewFunctionsError(f"{f} functions cannot determine a map from {k_src} basis vectors: "
-                                   f"need f ≥ k_src (MATH.md erratum 10); add descriptors or truncate the basis")
+                                   f"need f ≥ k_src (docs/maths.md note 10); add descriptors or truncate the basis")
     if commutativity < 0:
         raise ValueError("commutativity must be ≥ 0")
     a = function_coefficients(B_src, F_src, A_src)  # (k_src, f)
@@ -202,7 +202,7 @@ def mean_edge_length(V, faces) -> float:
 
 
 def err_gd(p2p, ground_truth, V, edge_length: float) -> float:
-    """Geodesic functional map error (eq. 5.2.26), as the **mean** over mapped vertices (MATH.md erratum 9).
+    """Geodesic functional map error (eq. 5.2.26), as the **mean** over mapped vertices (docs/maths.md note 9).
 
     ``mean_i ‖V[gt_i] − V[ρ_i]‖₂ / edge_length`` — Euclidean distances on the mesh the
     indices point into (``V (n, 3)``), in average-edge-length units.

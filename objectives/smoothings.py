@@ -1,4 +1,4 @@
-"""Smoothings of the ℓ1 norm (thesis §6.5, Table 6.1; MATH.md §4 and Errata 5–6).
+"""Smoothings of the ℓ1 norm (thesis §6.5, Table 6.1; docs/maths.md §4 and notes 5–6).
 
 A smoothing ``f_ε`` of ``|x|`` (thesis Def. 6.5.1) satisfies ``f_ε(0) = 0``,
 ``f_ε(x) → |x|`` and ``f_ε'(x) → sgn x`` as ``ε → 0``. The ten functions of
@@ -15,8 +15,8 @@ Numerics (checked by ``tests/test_smoothings.py``):
   differs from ``jax.grad(jnp.abs)(0.) == 1``);
 * the C¹ ones (f3, f6, f7, f8) also have the correct second derivative at 0
   (``jax.hessian`` gives ``1/ε``, ``1/δ``, ``(ε+δ)/(εδ)``, ``1/ε``);
-* ``f8`` never overflows (Erratum 6) and ``f7`` is continuous at ``|x| = δ``
-  (Erratum 5); ``jnp.where`` branches use the "double where" so the branch not
+* ``f8`` never overflows (docs/maths.md note 6) and ``f7`` is continuous at ``|x| = δ``
+  (docs/maths.md note 5); ``jnp.where`` branches use the "double where" so the branch not
   taken cannot inject NaN into a gradient.
 
 Where ``f`` is not C¹ at 0 (f0, f1, f2, f4, f5, f9) a gradient solver still runs
@@ -191,7 +191,7 @@ def _f7_inner(x, eps, delta):
 
 
 def f7(x: Float[ArrayLike, "*s"], eps: float = 1e-3, delta: float = 1e-3) -> Float[Array, "*s"]:
-    """Moreau-type envelope built from f3 (Table 6.1, with Erratum 5).
+    """Moreau-type envelope built from f3 (Table 6.1, with docs/maths.md note 5).
 
     ``g(x) = ((ε+δ)/δ)(|x| + ε log(ε/(ε+|x|)))`` for ``|x| ≤ δ``, and
     ``|x| − δ + g(δ)`` for ``|x| > δ``, so f7 is continuous at ``|x| = δ`` for any
@@ -213,7 +213,7 @@ _F8_SWITCH = 30.0
 
 
 def f8(x: Float[ArrayLike, "*s"], eps: float = 1e-3, delta: float = 1e-3) -> Float[Array, "*s"]:
-    """``f8(x) = ε log cosh(x/ε)`` in the overflow-free form (Erratum 6)
+    """``f8(x) = ε log cosh(x/ε)`` in the overflow-free form (docs/maths.md note 6)
 
     ``f8(x) = |x| + ε log(1 + e^{−2|x|/ε}) − ε log 2``.
 
@@ -275,8 +275,8 @@ _TABLE: dict[str, Smoothing] = {
         Smoothing("f4", f4, False, "exponential; one-sided slopes ±(1−ε)"),
         Smoothing("f5", f5, False, "scaled exponential; one-sided slopes ±(1−ε²)"),
         Smoothing("f6", f6, True, "Huber / Moreau envelope of width δ; C¹, C² at 0"),
-        Smoothing("f7", f7, True, "Moreau-type envelope from f3 (Erratum 5 constant); C¹, C² at 0"),
-        Smoothing("f8", f8, True, "ε log cosh(x/ε), overflow-free (Erratum 6); smooth"),
+        Smoothing("f7", f7, True, "Moreau-type envelope from f3 (the constant of docs/maths.md note 5); C¹, C² at 0"),
+        Smoothing("f8", f8, True, "ε log cosh(x/ε), overflow-free (docs/maths.md note 6); smooth"),
         Smoothing("f9", f9, False, "f3 with log term scaled by δ; one-sided slopes ±(1−δ)"),
     )
 }

@@ -1,6 +1,6 @@
 """Optimisation on generalised Stiefel manifolds ``{X ∈ R^{n×k} : XᵀMX = I}`` in JAX.
 
-Public API (MATH.md §1–3):
+Public API (docs/maths.md §1–3):
 
 * ``GeneralizedStiefel(M, k, metric=..., retraction=...)`` — the manifold.
 * ``SequentialConstraint`` — ``{x : ΦᵀMx = 0, xᵀMx = 1}`` for column-by-column solves.
@@ -12,7 +12,7 @@ Public API (MATH.md §1–3):
   ``minimize_sequential`` (thesis Algorithm 6); ``solve_block``, the block solver as a pure
   jittable/vmappable function.
 * ``RiemannianImplicitAdjoint`` — derivatives of solutions by the implicit function theorem
-  (MATH.md §9); ``riemannian_hessian``, ``hessian_operator`` — the Riemannian Hessian.
+  (docs/maths.md §9); ``riemannian_hessian``, ``hessian_operator`` — the Riemannian Hessian.
 * ``Result``, ``SequentialResult``, ``Status``, ``History`` — solver outcomes; ``Progress`` — what a
   ``progress=`` callback receives between compiled chunks of iterations (``stiefel.driver``), and
   ``CallbackError`` when that callback raises.
@@ -24,6 +24,8 @@ Public API (MATH.md §1–3):
   project's own objectives), so a new process neither traces nor compiles them;
   ``stiefel.buckets`` — the size grid on which ``objectives.BlockCMM`` pads problems so that
   similar sizes share one program.
+* ``canonical_signs(X)`` — the sign convention of every basis the toolkit returns (each column's
+  largest-magnitude entry is positive; ``stiefel.signs``).
 * Errors: ``StiefelError`` and its subclasses (``ParameterError`` for an option out of range,
   ``NonFiniteError``, ``RankDeficientError``, ...); ``stiefel.validation`` — the checks behind them.
 
@@ -57,5 +59,6 @@ from .preconditioning import (
     shifted_inverse,
 )
 from .result import History, Result, SequentialResult, Status
+from .signs import canonical_signs, column_signs
 from .sequential import DIRECTIONS, SequentialConstraint, SequentialOptions, minimize_sequential
 from . import sharding, validation

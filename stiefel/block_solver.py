@@ -5,7 +5,7 @@ Both run the optimistix minimisers of ``stiefel.minimisers`` (``RiemannianCG``,
 ``RiemannianLBFGS``, ``RiemannianBB``; the methods are described there) through
 ``optx.minimise`` with ``stiefel.RiemannianImplicitAdjoint``: one implementation, and every
 solve is differentiable with respect to ``args``, arrays closed over by ``F`` and ``M``
-(MATH.md §9). All accept a preconditioner (``stiefel.preconditioning``): the search
+(docs/maths.md §9). All accept a preconditioner (``stiefel.preconditioning``): the search
 direction is then the gradient in the metric ``tr(Z1ᵀP⁻¹Z2)``, still a guaranteed descent
 direction. The reported gradient norm is always the manifold metric's, so runs are comparable.
 """
@@ -210,7 +210,7 @@ def minimize(
         ``history.monitor`` (e.g. the true non-smooth objective, for time-to-target curves).
       args: parameters θ passed to ``F(X, args)``. The solution is differentiable in them (and in
         arrays closed over by F, and in M) under ``jax.jvp``/``jax.grad``/``jax.jacfwd`` by implicit
-        differentiation (MATH.md §9); call ``minimize`` inside the differentiated function. Under
+        differentiation (docs/maths.md §9); call ``minimize`` inside the differentiated function. Under
         such tracing the solve is not timed separately (``wall_time = compile_time = 0``) and
         ``throw`` checks run inside the computation.
       adjoint: the ``optx`` adjoint (default ``RiemannianImplicitAdjoint(throw=throw)``; pass

@@ -1,4 +1,4 @@
-"""The Riemannian Hessian on ``S_M = {XᵀMX = I}`` (MATH.md §9).
+"""The Riemannian Hessian on ``S_M = {XᵀMX = I}`` (docs/maths.md §9).
 
 For ``F: R^{n×k} → R`` with Euclidean gradient ``G = ∇F(X)`` and Hessian action
 ``H[ξ] = ∇²F(X)[ξ]`` (a ``jax.jvp`` of ``jax.grad F``), the Riemannian Hessian of the
@@ -9,7 +9,7 @@ M-weighted metric ``⟨ξ, η⟩ = tr(ξᵀMη)`` is
 for tangent ``ξ`` (the projection of the ambient derivative of the gradient field: the
 Levi-Civita connection of the embedded metric). It is self-adjoint in ``⟨·,·⟩``. For the
 canonical metric the same operator is returned: at a critical point the Hessian does not
-depend on the metric, and MATH.md §9 prescribes this form for second-order work.
+depend on the metric, and docs/maths.md §9 prescribes this form for second-order work.
 """
 
 from __future__ import annotations

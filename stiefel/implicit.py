@@ -1,4 +1,4 @@
-"""Derivatives of a manifold minimiser ``X*(θ)`` by the implicit function theorem (MATH.md §9).
+"""Derivatives of a manifold minimiser ``X*(θ)`` by the implicit function theorem (docs/maths.md §9).
 
 ``RiemannianImplicitAdjoint`` is an ``optimistix`` adjoint: pass it to ``optx.minimise`` with a
 ``stiefel`` minimiser (``stiefel.minimize`` always uses it). It differentiates with respect to

@@ -1,4 +1,4 @@
-"""Strong Armijo–Wolfe line search on a scalar function (MATH.md §3, thesis Def. 6.2.6).
+"""Strong Armijo–Wolfe line search on a scalar function (docs/maths.md §3, thesis Def. 6.2.6).
 
 The search works on ``h(τ) = F(R_X(τ d))`` given as ``phi(τ) -> (h(τ), h'(τ))``;
 ``along_curve`` builds ``phi`` with ``h'`` from ``jax.jvp`` (exact for every

@@ -1,4 +1,4 @@
-"""The generalised Stiefel manifold ``S_M = {X ∈ R^{n×k} : XᵀMX = I_k}`` (MATH.md §1, thesis §6.1)."""
+"""The generalised Stiefel manifold ``S_M = {X ∈ R^{n×k} : XᵀMX = I_k}`` (docs/maths.md §1, thesis §6.1)."""
 
 from __future__ import annotations
 
@@ -117,7 +117,7 @@ class GeneralizedStiefel(eqx.Module):
         return jnp.sqrt(jnp.maximum(self.inner(X, Z, Z), 0.0))
 
     def egrad_to_rgrad(self, X: Point, G: Point) -> Point:
-        """Riemannian gradient from the Euclidean partial derivative ``G = ∂F/∂X`` (MATH.md §1).
+        """Riemannian gradient from the Euclidean partial derivative ``G = ∂F/∂X`` (docs/maths.md §1).
 
         Euclidean metric: ``M⁻¹G − X sym(XᵀG)``; canonical: ``M⁻¹G − X GᵀX``.
         """
@@ -128,7 +128,7 @@ class GeneralizedStiefel(eqx.Module):
 
     def ehess_to_rhess(self, X: Point, G: Point, H: Point, xi: Point) -> Point:
         """Riemannian Hessian ``P_X(M⁻¹H − ξ sym(XᵀG))`` from the Euclidean gradient ``G`` and the
-        Euclidean Hessian action ``H = ∇²F(X)[ξ]`` at tangent ``ξ`` (MATH.md §9; both metrics,
+        Euclidean Hessian action ``H = ∇²F(X)[ξ]`` at tangent ``ξ`` (docs/maths.md §9; both metrics,
         see ``stiefel.hessian``)."""
         return self.proj(X, self.op.solve(H) - xi @ sym(X.T @ G))
 

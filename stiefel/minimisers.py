@@ -1,4 +1,4 @@
-"""Riemannian block minimisers as ``optimistix.AbstractMinimiser`` subclasses (MATH.md §1, §3).
+"""Riemannian block minimisers as ``optimistix.AbstractMinimiser`` subclasses (docs/maths.md §1, §3).
 
 ``optx.minimise(fn, RiemannianCG(S, rtol=..., atol=...), X0, args, max_steps=...,
 adjoint=stiefel.RiemannianImplicitAdjoint())`` minimises ``fn(X, args)`` over

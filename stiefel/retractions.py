@@ -1,4 +1,4 @@
-"""Retractions onto the generalised Stiefel manifold ``{X : XᵀMX = I}`` (MATH.md §1).
+"""Retractions onto the generalised Stiefel manifold ``{X : XᵀMX = I}`` (docs/maths.md §1).
 
 Every function takes the metric operator ``M`` (anything with ``.mv``), a point
 ``X`` of shape ``(n, k)`` and a tangent vector ``Z`` of the same shape, and

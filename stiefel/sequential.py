@@ -1,4 +1,4 @@
-"""Column-by-column optimisation (thesis §6.4, Algorithm 6; MATH.md §2).
+"""Column-by-column optimisation (thesis §6.4, Algorithm 6; docs/maths.md §2).
 
 For a column-separable objective ``F(X) = Σ_j f(x_j)``, column ``m+1`` minimises
 ``f`` over ``V_Φ ∩ E_M = {x : ΦᵀMx = 0, xᵀMx = 1}``, ``Φ = [x_1 … x_m]``.
@@ -50,7 +50,7 @@ DIRECTIONS = ("cg", "momentum", "gd")
 
 
 class SequentialConstraint(eqx.Module):
-    """``{x : ΦᵀMx = 0, xᵀMx = 1}`` (MATH.md §2) with ``ΦᵀMΦ = I`` on the active columns.
+    """``{x : ΦᵀMx = 0, xᵀMx = 1}`` (docs/maths.md §2) with ``ΦᵀMΦ = I`` on the active columns.
 
     ``Phi`` has shape ``(n, c)``; columns that are zero impose no constraint, so a
     fixed-width ``Phi`` can hold the columns found so far.
@@ -82,7 +82,7 @@ class SequentialConstraint(eqx.Module):
         return jnp.dot(a, self.op.mv(b))
 
     def egrad_to_rgrad(self, x, g):
-        """``P M⁻¹ g`` with ``P`` the tangent projector (MATH.md §2)."""
+        """``P M⁻¹ g`` with ``P`` the tangent projector (docs/maths.md §2)."""
         return self.proj(x, self.op.solve(g))
 
     def retract(self, x, z):

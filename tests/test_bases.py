@@ -1,6 +1,6 @@
 """GLMHs, LMHs, Hamiltonian eigenfunctions (objectives.bases) and basis evaluation (objectives.evaluation).
 
-Thesis §3.1, §3.3 (Thm. 3.3.7), §4.2, §4.6; MATH.md §4, §8. Dense n × n matrices appear
+Thesis §3.1, §3.3 (Thm. 3.3.7), §4.2, §4.6; docs/maths.md §4, §8. Dense n × n matrices appear
 here only as references on the 502-vertex knight.
 """
 

@@ -1,4 +1,4 @@
-"""Compressed manifold modes: manifold methods vs the ADMM baseline (MATH.md §4–5)."""
+"""Compressed manifold modes: manifold methods vs the ADMM baseline (docs/maths.md §4–5)."""
 
 from pathlib import Path
 

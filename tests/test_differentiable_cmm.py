@@ -1,6 +1,6 @@
 """Derivatives of compressed manifold modes (objectives.differentiable.cmm_solve) with respect to μ,
 a per-vertex ℓ1 weight, the smoothing width and the vertex positions (through mesh.laplacian_jax),
-against central finite differences of re-solved problems (MATH.md §9)."""
+against central finite differences of re-solved problems (docs/maths.md §9)."""
 
 import jax
 import jax.numpy as jnp

@@ -1,4 +1,4 @@
-"""Functional maps (objectives.fmaps; thesis §5.1–5.3, MATH.md §8).
+"""Functional maps (objectives.fmaps; thesis §5.1–5.3, docs/maths.md §8).
 
 Pairs: the knight and a vertex-permuted copy (an exact discrete isometry, Def. 3.4.8)
 and the knight and a noisy copy (same connectivity, not isometric).
@@ -172,7 +172,7 @@ def test_err_gd_and_edge_length():
     e = fmaps.mean_edge_length(V, faces)
     assert e == pytest.approx(tm.edges_unique_length.mean())
     assert e == pytest.approx((3 + 4 + 5 + 4 + 3) / 5)
-    # mean (erratum 9), not sum: distances 5 and 0 → 2.5 / e
+    # mean (docs/maths.md note 9), not sum: distances 5 and 0 → 2.5 / e
     assert fmaps.err_gd(np.array([0, 2]), np.array([3, 2]), V, e) == pytest.approx(2.5 / e)
     with pytest.raises(fmaps.FmapShapeError):
         fmaps.err_gd(np.array([0, 1]), np.array([0]), V, e)

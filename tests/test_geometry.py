@@ -1,4 +1,4 @@
-"""Tangent projection, metrics and Riemannian gradients (MATH.md §1, errata 1)."""
+"""Tangent projection, metrics and Riemannian gradients (docs/maths.md §1 and note 1)."""
 
 import jax
 import jax.numpy as jnp
@@ -61,7 +61,7 @@ def test_transport_pair_is_two_transports(kind):
 
 
 def test_metrics_differ_only_on_rotations():
-    """Canonical metric halves the weight of the XᵀMZ (rotation) part (MATH.md §1)."""
+    """Canonical metric halves the weight of the XᵀMZ (rotation) part (docs/maths.md §1)."""
     M = metric_matrix("diagonal", N)
     Se, Sc = GeneralizedStiefel(M, K), GeneralizedStiefel(M, K, metric="canonical")
     X = Se.random_point(jax.random.PRNGKey(5))
@@ -96,7 +96,7 @@ def test_preconditioned_gradient_in_its_metric(kind):
 
 @pytest.mark.parametrize("kind", M_KINDS)
 def test_sequential_constraint_set(kind):
-    """{x : ΦᵀMx = 0, xᵀMx = 1}: projection, tangent projector, gradient (MATH.md §2)."""
+    """{x : ΦᵀMx = 0, xᵀMx = 1}: projection, tangent projector, gradient (docs/maths.md §2)."""
     M = metric_matrix(kind, N)
     S = GeneralizedStiefel(M, K)
     Phi = S.random_point(jax.random.PRNGKey(10))
@@ -129,7 +129,7 @@ def test_gradient_identity_over_shapes(n, data, seed, kind, metric):
 
 
 class _ThesisSlip:
-    """The manifold with erratum 1 re-introduced: the gradient projects G itself, without M⁻¹."""
+    """The manifold with docs/maths.md note 1 re-introduced: the gradient projects G itself, without M⁻¹."""
 
     def __init__(self, S):
         self._S = S
@@ -142,7 +142,7 @@ class _ThesisSlip:
 
 
 def test_checker_rejects_the_thesis_gradient_slip():
-    """MATH.md erratum 1: proj(G) is not the gradient for non-uniform M; the checker must notice."""
+    """docs/maths.md note 1: proj(G) is not the gradient for non-uniform M; the checker must notice."""
     S = GeneralizedStiefel(metric_matrix("diagonal", N), K)
     X = S.random_point(jax.random.PRNGKey(0))
     with pytest.raises(AssertionError):

@@ -1,4 +1,4 @@
-"""Riemannian Hessian and implicit derivatives of manifold solutions (MATH.md §9), against
+"""Riemannian Hessian and implicit derivatives of manifold solutions (docs/maths.md §9), against
 finite differences of re-solved problems, scipy's eigh and the eigenvector perturbation formula."""
 
 import jax

@@ -1,4 +1,4 @@
-"""``laplacian_jax`` (MATH.md §7, Ex. 2.5.17, 2.5.22) against the scipy assembly, finite differences and jit."""
+"""``laplacian_jax`` (docs/maths.md §7, Ex. 2.5.17, 2.5.22) against the scipy assembly, finite differences and jit."""
 
 from __future__ import annotations
 

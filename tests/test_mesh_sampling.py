@@ -1,4 +1,4 @@
-"""Poisson-disk sampling and the local-function matrix U (thesis §7.1, MATH.md §6)."""
+"""Poisson-disk sampling and the local-function matrix U (thesis §7.1, docs/maths.md §6)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Tests for objectives.smoothings: thesis Table 6.1, Def. 6.5.1, MATH.md §4, Errata 5–6."""
+"""Tests for objectives.smoothings: thesis Table 6.1, Def. 6.5.1, docs/maths.md §4 and note 5–6."""
 
 import functools
 
@@ -15,7 +15,7 @@ from hypothesis import strategies as st  # noqa: E402
 from objectives import smoothings as S  # noqa: E402
 
 NAMES = [f"f{i}" for i in range(10)]
-C1_EXPECTED = {"f3", "f6", "f7", "f8"}  # Table 6.1 analysis (MATH.md §4)
+C1_EXPECTED = {"f3", "f6", "f7", "f8"}  # Table 6.1 analysis (docs/maths.md §4)
 
 
 # ---------------------------------------------------------------------------
@@ -24,7 +24,7 @@ C1_EXPECTED = {"f3", "f6", "f7", "f8"}  # Table 6.1 analysis (MATH.md §4)
 
 
 def ref_value(name, x, eps, delta):
-    """Table 6.1 f(x) as printed (f7 outer branch per Erratum 5), naive numpy."""
+    """Table 6.1 f(x) as printed (f7 outer branch per docs/maths.md note 5), naive numpy."""
     x = np.asarray(x, dtype=np.float64)
     a = np.abs(x)
     if name == "f0":
@@ -221,7 +221,7 @@ def test_grad_matches_table_derivative(name, eps, delta):
 
 
 # ---------------------------------------------------------------------------
-# robustness: extreme inputs, errata 5 and 6
+# robustness: extreme inputs, docs/maths.md note 5 and 6
 # ---------------------------------------------------------------------------
 
 EXTREME64 = [0.0, 1e-300, -1e-300, 1e10, -1e10, 1e300, -1e300, 1.7e308, -1.7e308, 5e-324]
@@ -253,7 +253,7 @@ def test_finite_at_extremes_float32(name):
 
 @pytest.mark.parametrize("eps,delta", [(1e-3, 5e-3), (5e-3, 1e-3), (1e-3, 1e-3), (0.2, 0.01)])
 def test_f7_continuous_at_delta(eps, delta):
-    """Erratum 5: f7 is continuous (and C¹) at |x| = δ for every ε, δ."""
+    """docs/maths.md note 5: f7 is continuous (and C¹) at |x| = δ for every ε, δ."""
     h = 1e-9 * delta
     for sgn in (1.0, -1.0):
         lo, hi = sgn * (delta - h), sgn * (delta + h)
