@@ -17,16 +17,13 @@ import warnings
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
-from .outputs import PROG, MuSpec, PartialColumns, stderr_line, to_jsonable, versions, write_ply
+from .options import DEFAULT_MU, GTOL, METHODS, StartFile, load_start, solver_from_args
+from .outputs import PROG, MuSpec, PartialColumns, parse_mu, stderr_line, to_jsonable, versions, write_ply
 from .progress import SolveProgress
 from .run_dir import RunDir
 
-__all__ = ["CLIError", "cmd_modes", "cmd_eigs", "cmd_compare", "outputs_of", "smoothing_names", "GTOL", "METHODS",
-           "SMOOTHINGS"]
+__all__ = ["CLIError", "cmd_modes", "cmd_eigs", "cmd_compare", "outputs_of", "GTOL", "METHODS"]
 
-GTOL = 1e-6
-METHODS = ("block", "sequential", "admm", "admm_sequential", "fast")  # objectives.cmm_solvers.SOLVERS
-SMOOTHINGS = tuple(f"f{i}" for i in range(10))
 PARTIAL = "modes.partial.npz"
 
 
@@ -50,22 +47,35 @@ class _Progress:
         print(f"[{time.perf_counter() - self.t0:7.2f}s] {msg}", file=stream, flush=True)
 
 
-LAPLACIANS = ("cotangent", "robust")
-_LAPLACIAN_TEXT = {"cotangent": "cotangent, lumped area, normalised to total area 1",
-                   "robust": "intrinsic-Delaunay cotangent (robust_laplacian, tufted cover), lumped area, "
-                             "normalised to total area 1"}
+def _laplacian_text(weights: str, area: str) -> str:
+    kind = ("intrinsic-Delaunay cotangent (robust_laplacian, tufted cover)" if weights == "robust" else weights)
+    return f"{kind} weights, {area} areas, normalised to total area 1"
 
 
-def _load(source: str | None, laplacian: str = "cotangent") -> tuple[Any, Any, dict]:
-    """``(mesh.Mesh, mesh.Laplacian, description)`` for a path or the demo mesh.
+EXAMPLE_PREFIX = "example:"
+
+
+def example_name(source: str) -> str:
+    """The name of ``mesh.examples`` that ``example:NAME`` asks for (``CLIError`` naming the choices)."""
+    from mesh.examples import EXAMPLES
+
+    name = source[len(EXAMPLE_PREFIX):]
+    if name not in EXAMPLES:
+        raise CLIError(f"unknown example mesh {name!r} in {source!r}; choose from "
+                       f"{', '.join(EXAMPLE_PREFIX + e for e in EXAMPLES)}")
+    return name
+
+
+def _load(source: str | None, weights: str = "cotangent", area: str = "lumped") -> tuple[Any, Any, dict]:
+    """``(mesh.Mesh, mesh.Laplacian, description)`` for a path, ``example:NAME`` or the demo mesh.
 
     Every change ``mesh.load`` made (``report.lines()``) and every warning is printed to stderr
-    and recorded in the description (``summary.json``'s ``mesh``); ``laplacian="robust"`` admits
+    and recorded in the description (``summary.json``'s ``mesh``); ``weights="robust"`` admits
     non-manifold meshes.
     """
     import mesh
 
-    robust = laplacian == "robust"
+    robust = weights == "robust"
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         if source is None:
@@ -73,6 +83,9 @@ def _load(source: str | None, laplacian: str = "cotangent") -> tuple[Any, Any, d
 
             m = mesh.load(demo_mesh(), warn=False, allow_nonmanifold=robust)
             name = DEMO_NAME
+        elif source.startswith(EXAMPLE_PREFIX) and not Path(source).is_file():
+            m = mesh.example(example_name(source), allow_nonmanifold=robust)
+            name = source
         else:
             path = Path(source)
             if not path.is_file():
@@ -82,13 +95,13 @@ def _load(source: str | None, laplacian: str = "cotangent") -> tuple[Any, Any, d
         report = m.report.lines()
         for line in report:
             stderr_line(f"{PROG}: mesh changed or found: {line}")
-        lap = mesh.laplacian(m, weights="robust" if robust else "cotangent")
+        lap = mesh.laplacian(m, weights=weights, area=area)
     messages = [" ".join(str(w.message).split()) for w in caught]
     for msg in dict.fromkeys(messages):  # each distinct warning once
         stderr_line(f"{PROG}: warning: {msg}")
     info = {"source": name, "n_vertices": m.n_vertices, "n_faces": m.n_faces, "n_components": m.n_components,
             "n_boundary_loops": m.n_boundary_loops, "euler_characteristic": m.euler_characteristic,
-            "n_nonmanifold_edges": m.n_nonmanifold_edges, "laplacian": _LAPLACIAN_TEXT[laplacian],
+            "n_nonmanifold_edges": m.n_nonmanifold_edges, "laplacian": _laplacian_text(weights, area),
             "changes": report, "cleaning_report": m.report.as_dict(), "warnings": list(dict.fromkeys(messages))}
     return m, lap, info
 
@@ -113,8 +126,12 @@ def _summary_head(args: argparse.Namespace, argv: Sequence[str] | None, mesh_inf
             "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
 
 
-def _mu_record(spec: MuSpec, mu: float) -> dict:
-    return {"given": spec.text, "relative": spec.relative, "value": mu}
+def _mu_record(spec: MuSpec, mu: float, pairs: Any = None) -> dict:
+    unit = {"": "absolute", "n": "times the vertex count", "λ": "times λ_(k−1)"}[spec.unit]
+    record = {"given": spec.text, "relative": spec.relative, "unit": unit, "value": mu}
+    if spec.unit == "λ" and pairs is not None:
+        record["eigenvalue"] = float(pairs[0][-1])  # λ_(k−1), the largest of the first max(k, 2) eigenvalues
+    return record
 
 
 def _encode(summary: dict) -> str:
@@ -168,20 +185,48 @@ def _finish(args: argparse.Namespace, run: RunDir, summary: dict) -> None:
 # ---------------------------------------------------------------------------- commands
 
 
+def _resolve_mu(args: argparse.Namespace, lap: Any, n: int) -> tuple[MuSpec, float, Any]:
+    """``(spec, μ, eigenpairs or None)``: ``--mu`` (default ``DEFAULT_MU``) resolved on this mesh; the first
+    ``max(k, 2)`` eigenpairs are computed here when μ is relative to λ (and handed on to the solve)."""
+    from objectives.cmm import first_eigenpairs, unpack_laplacian
+
+    spec = args.mu if args.mu is not None else parse_mu(DEFAULT_MU)
+    pairs = None
+    if spec.unit == "λ":
+        pairs = first_eigenpairs(*unpack_laplacian(lap), max(args.k, 2))
+    return spec, spec.resolve(n, None if pairs is None else float(pairs[0][-1])), pairs
+
+
+def _start(args: argparse.Namespace, n: int) -> Any:
+    """``--start``: ``"eigen"``, ``"random"`` or the ``(n, k)`` array of the file (``CLIError`` for a bad one)."""
+    if not isinstance(args.start, StartFile):
+        return args.start
+    try:
+        return load_start(args.start, n, args.k)
+    except ValueError as e:
+        raise CLIError(str(e)) from None
+
+
 def cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir) -> int:
     import mesh
     import numpy as np
-    from objectives.cmm import compressed_modes
+    from objectives import smoothings
+    from objectives.cmm import compressed_modes, select_mu
 
     say, t_all, out = _Progress(args.quiet, args.json), time.perf_counter(), run.path
     timings: dict[str, float] = {}
     t = time.perf_counter()
-    m, lap, mesh_info = _load(args.mesh, args.laplacian)
+    m, lap, mesh_info = _load(args.mesh, args.weights, args.area)
     _check_k(args.k, m.n_vertices)
-    timings["load_s"] = time.perf_counter() - t
-    mu = args.mu.resolve(m.n_vertices)
+    start = _start(args, m.n_vertices)
     say(f"mesh {mesh_info['source']}: n = {m.n_vertices} vertices, {m.n_faces} faces")
     extra: dict[str, Any] = {}
+    pairs = None
+    if args.target_sparsity is None:
+        spec, mu, pairs = _resolve_mu(args, lap, m.n_vertices)
+        if pairs is not None and isinstance(start, str):
+            extra["eigenpairs"] = pairs
+    timings["load_s"] = time.perf_counter() - t
     U = None
     if args.method == "fast":
         d = args.samples or max(10 * args.k, m.n_vertices // 10)
@@ -190,17 +235,26 @@ def cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir)
         U = mesh.local_functions(m, n_samples=d).U
         timings["local_functions_s"] = time.perf_counter() - t
         say(f"local functions: d = {d}")
-    solver, passed = _solver(args, args.method, args.smoothing, local_functions=U)
-    say(f"solving: k = {args.k}, mu = {mu:.6g} ({args.mu.text}), method = {args.method}, "
-        f"smoothing = {args.smoothing}, weighting = {args.weighting}")
+    solver, passed = solver_from_args(args, args.method, args.smoothing, local_functions=U)
+    smoothing = f"{args.smoothing} ({smoothings.info(args.smoothing).note.split(' ')[0].lower()})"
+    target = f"target sparsity {args.target_sparsity:g}" if args.target_sparsity is not None else None
+    say(f"solving: k = {args.k}, mu = {target or f'{mu:.6g} ({spec.text})'}, method = {args.method}, "
+        f"smoothing = {smoothing}, weighting = {args.weighting}, start = {args.start}")
     partial = _partial_writer(args.method, compressed_modes, out, say)
     if partial is not None:
         extra["callback"] = partial
     t = time.perf_counter()
     bar = SolveProgress(quiet=args.quiet, label=f"{args.method}")
+    trials = None
     try:
-        res = compressed_modes(lap, args.k, mu, solver=solver, weighting=args.weighting, seed=args.seed,
-                               progress=bar, **extra)
+        if target is None:
+            res = compressed_modes(lap, args.k, mu, solver=solver, weighting=args.weighting, seed=args.seed,
+                                   start=start, progress=bar, **extra)
+        else:
+            mu, res, trials = select_mu(lap, args.k, args.target_sparsity, solver=solver, weighting=args.weighting,
+                                        seed=args.seed, start=start, progress=bar, **extra)
+            spec = MuSpec(f"{mu!r}", mu, "")
+            say(f"mu = {mu:.6g} gives sparsity {res.sparsity['1e-3']:.3f} ({len(trials)} solves)")
     finally:
         bar.close()
     solve_total = time.perf_counter() - t
@@ -212,11 +266,15 @@ def cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir)
         f"orthogonality = {res.orthogonality:.2e}")
 
     t = time.perf_counter()
+    support = _supports(res.modes, np.asarray(lap.A.diagonal()))
     diag = {"objective": res.objective, "dirichlet": res.dirichlet, "l1": res.l1, "sparsity": res.sparsity,
-            "orthogonality": res.orthogonality, "iterations": res.iterations, "status": res.status}
+            "support_area": support, "orthogonality": res.orthogonality, "iterations": res.iterations,
+            "status": res.status}
     params = dict(res.params)
-    params["mu"] = _mu_record(args.mu, mu)
-    params["laplacian"] = args.laplacian
+    params["mu"] = _mu_record(spec, mu, extra.get("eigenpairs", pairs)) if target is None else {"target_sparsity": args.target_sparsity,
+                                                                 "value": mu, "trials": trials}
+    params["laplacian"] = _laplacian_text(args.weights, args.area)
+    params["start"] = str(args.start)
     run.write("npz", "modes.npz", lambda fh: np.savez_compressed(
         fh, modes=res.modes, compressed_eigenvalues=res.compressed_eigenvalues, vertices=m.vertices,
         faces=m.faces, mu=mu, diagnostics=json.dumps(to_jsonable(diag)), parameters=json.dumps(to_jsonable(params))))
@@ -225,7 +283,8 @@ def cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir)
     if not args.no_png:
         from .render import contact_sheet
 
-        titles = [f"mode {j}  λ̃ = {lam:.4g}" for j, lam in enumerate(res.compressed_eigenvalues)]
+        titles = [f"mode {j} · λ̃ = {lam:.4g} · support {100 * s:.1f} %"
+                  for j, (lam, s) in enumerate(zip(res.compressed_eigenvalues, support))]
         picture_error = _picture(run, "modes.png", lambda path: contact_sheet(
             path, m.vertices, m.faces, res.modes, titles=titles))
     summary = _summary_head(args, argv, mesh_info)
@@ -246,29 +305,17 @@ def cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir)
     return _exit_code(interrupt)
 
 
+def _supports(modes: Any, area: Any, threshold: float = 1e-3) -> list[float]:
+    """Per mode, the fraction of the surface's area where ``|ψ| ≥ threshold · max|ψ|`` (areas sum to 1)."""
+    import numpy as np
+
+    P = np.abs(np.asarray(modes))
+    on = P >= threshold * np.max(P, axis=0, keepdims=True)
+    return [float(v) for v in (area[:, None] * on).sum(axis=0) / area.sum()]
+
+
 _PARTIAL_NOTE = ("modes are written when the solve finishes (only --method sequential reports its columns "
                  "as they complete)")
-
-
-def _solver(args: argparse.Namespace, method: str, smoothing: str, *, local_functions: Any = None,
-            runtime_smoothing: bool = False) -> tuple[Any, dict]:
-    """``(solver, options passed)``: the ``objectives.cmm_solvers`` object for ``--method``. Every solver
-    gets ``--max-iters``; the manifold solvers also ``--smoothing`` and ``--gtol`` (and, for
-    ``compare-smoothings``, ``runtime_smoothing``: one compilation for all smoothings); fast its ``U``."""
-    from objectives.cmm_solvers import SOLVERS, FastCMM
-
-    passed: dict[str, Any] = {"max_iters": args.max_iters}
-    if method in ("block", "sequential"):
-        passed.update(smoothing=smoothing, gtol=GTOL if args.gtol is None else args.gtol)
-        if runtime_smoothing:
-            passed["runtime_smoothing"] = True
-        return SOLVERS[method](**passed), passed
-    if args.gtol is not None:
-        stderr_line(f"{PROG}: warning: --gtol applies to the block and sequential solvers; {method} stops on its "
-                    "residual tolerances eps_abs/eps_rel (recorded in summary.json)")
-    if method == "fast":
-        return FastCMM(local_functions, **passed), passed
-    return SOLVERS[method](**passed), passed
 
 
 def _partial_writer(method: str, solve: Callable, out: Path, say: Callable[[str], None]) -> PartialColumns | None:
@@ -285,7 +332,7 @@ def cmd_eigs(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir) 
     import numpy as np
 
     say, t_all, out = _Progress(args.quiet, args.json), time.perf_counter(), run.path
-    m, lap, mesh_info = _load(args.mesh, args.laplacian)
+    m, lap, mesh_info = _load(args.mesh, args.weights, args.area)
     _check_k(args.k, m.n_vertices)
     t_setup = time.perf_counter() - t_all
     say(f"mesh {mesh_info['source']}: n = {m.n_vertices} vertices, {m.n_faces} faces")
@@ -313,7 +360,7 @@ def cmd_eigs(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir) 
         picture_error = _picture(run, "eigs.png", lambda path: contact_sheet(path, m.vertices, m.faces, evecs,
                                                                               titles=titles))
     summary = _summary_head(args, argv, mesh_info)
-    summary.update(parameters={"k": args.k, "laplacian": _LAPLACIAN_TEXT[args.laplacian]},
+    summary.update(parameters={"k": args.k, "laplacian": _laplacian_text(args.weights, args.area)},
                    eigenvalues=evals, diagnostics={"orthogonality": orth, "max_residual": resid},
                    timings={"compile_s": 0.0, "solve_s": t_eig, "setup_s": t_setup,
                             "write_s": time.perf_counter() - t, "total_s": time.perf_counter() - t_all})
@@ -325,115 +372,6 @@ def cmd_eigs(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir) 
     return 0
 
 
-_COLUMNS = ("smoothing", "c1_at_zero", "status", "objective", "dirichlet", "l1", "sparsity_1e-3",
-            "orthogonality", "iterations", "time_s", "compile_s")
-
-
-def smoothing_names(text: str) -> list[str]:
-    names = [s.strip() for s in text.split(",") if s.strip()]
-    bad = [s for s in names if s not in SMOOTHINGS]
-    if bad or not names:
-        raise CLIError(f"unknown smoothing(s) {bad or names}; choose from {', '.join(SMOOTHINGS)}")
-    return names
-
-
-def cmd_compare(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir) -> int:
-    import numpy as np
-    from objectives import smoothings
-    from objectives.cmm import compressed_modes, first_eigenpairs, unpack_laplacian
-
-    names = smoothing_names(args.smoothings)
-    say, t_all, out = _Progress(args.quiet, args.json), time.perf_counter(), run.path
-    m, lap, mesh_info = _load(args.mesh, args.laplacian)
-    _check_k(args.k, m.n_vertices)
-    mu = args.mu.resolve(m.n_vertices)
-    say(f"mesh {mesh_info['source']}: n = {m.n_vertices}; k = {args.k}, mu = {mu:.6g}, method = {args.method}")
-    pairs = first_eigenpairs(*unpack_laplacian(lap), max(args.k, 2))  # the start of every smoothing, once
-    t_setup = time.perf_counter() - t_all
-    rows: list[dict] = []
-    first_modes: list[tuple[str, Any]] = []
-    passed: dict[str, Any] = {}
-    interrupt = None
-    totals = {"compile_s": 0.0, "solve_s": 0.0}
-    for name in names:
-        row: dict[str, Any] = {"smoothing": name, "c1_at_zero": smoothings.info(name).c1_at_zero}
-        if interrupt is not None:
-            rows.append({**row, "status": "not run (interrupted)"})
-            continue
-        t = time.perf_counter()
-        bar = SolveProgress(quiet=args.quiet, label=name)
-        try:
-            solver, passed = _solver(args, args.method, name, runtime_smoothing=True)
-            r = compressed_modes(lap, args.k, mu, solver=solver, weighting=args.weighting, seed=args.seed,
-                                 start="eigen", progress=bar, eigenpairs=pairs)
-            row.update(status=r.status, objective=r.objective, dirichlet=r.dirichlet, l1=r.l1,
-                       **{"sparsity_1e-3": r.sparsity["1e-3"]}, orthogonality=r.orthogonality,
-                       iterations=r.iterations, time_s=time.perf_counter() - t, compile_s=r.compile_time)
-            totals["compile_s"] += r.compile_time
-            totals["solve_s"] += r.wall_time
-            first_modes.append((name, r.modes[:, 0]))
-            interrupt = _interrupted_solve(args, r.status)
-        except Exception as e:  # a smoothing that breaks the solver (f0) is reported, not fatal
-            row.update(status=f"failed: {type(e).__name__}: {' '.join(str(e).split())[:120]}",
-                       time_s=time.perf_counter() - t)
-        finally:
-            bar.close()
-        rows.append(row)
-        say(f"{name}: {row['status']}, objective = {row.get('objective', float('nan')):.6g}, "
-            f"{row['time_s']:.2f}s")
-    t = time.perf_counter()
-    md, csv_text = _tables(rows)
-    run.write_text("markdown", "comparison.md", md)
-    run.write_text("csv", "comparison.csv", csv_text)
-    picture_error = None
-    if first_modes and not args.no_png:
-        from .render import contact_sheet
-
-        # the first mode of each smoothing, one row each (cf. thesis Fig. 6.10–6.11)
-        fields = np.stack([f for _, f in first_modes], axis=1)
-        picture_error = _picture(run, "comparison.png", lambda path: contact_sheet(
-            path, m.vertices, m.faces, fields, titles=[f"{n}: first mode" for n, _ in first_modes]))
-    summary = _summary_head(args, argv, mesh_info)
-    summary.update(parameters={"k": args.k, "mu": _mu_record(args.mu, mu), "method": args.method,
-                               "laplacian": args.laplacian,
-                               "weighting": args.weighting, "start": "eigen",
-                               "gtol": GTOL if args.gtol is None else args.gtol, "max_iters": args.max_iters},
-                   solver_options={k: v for k, v in passed.items() if k != "smoothing"},
-                   mu=mu, results=rows)
-    if interrupt is not None:
-        summary["interrupted"] = interrupt
-    if picture_error:
-        summary["picture_error"] = picture_error
-    write_s, total_s = time.perf_counter() - t, time.perf_counter() - t_all
-    # setup: the mesh and Laplacian, and each solve's eigenbasis and factorisation
-    setup_s = t_setup + max(0.0, total_s - t_setup - write_s - totals["compile_s"] - totals["solve_s"])
-    summary["timings"] = {**totals, "setup_s": setup_s, "write_s": write_s, "total_s": total_s}
-    _finish(args, run, summary)
-    say(f"wrote {out / 'comparison.md'}, {out / 'comparison.csv'} and {out / 'summary.json'}")
-    return _exit_code(interrupt)
-
-
-def _fmt(v: Any) -> str:
-    if isinstance(v, float):
-        return f"{v:.6g}"
-    return "" if v is None else str(v)
-
-
-def _tables(rows: list[dict]) -> tuple[str, str]:
-    """``(markdown, csv)`` texts of ``rows`` with the columns ``_COLUMNS``."""
-    import csv
-    import io
-
-    buf = io.StringIO(newline="")
-    w = csv.DictWriter(buf, fieldnames=_COLUMNS, extrasaction="ignore")
-    w.writeheader()
-    for r in rows:
-        w.writerow({c: r.get(c, "") for c in _COLUMNS})
-    lines = ["| " + " | ".join(_COLUMNS) + " |", "|" + "---|" * len(_COLUMNS)]
-    lines += ["| " + " | ".join(_fmt(r.get(c)) for c in _COLUMNS) + " |" for r in rows]
-    return "\n".join(lines) + "\n", buf.getvalue()
-
-
 def outputs_of(args: argparse.Namespace) -> tuple[tuple[str, ...], tuple[str, ...]]:
     """``(names this run may write, names the command always owns)`` for ``RunDir``."""
     png = () if getattr(args, "no_png", True) else ("png",)
@@ -442,3 +380,10 @@ def outputs_of(args: argparse.Namespace) -> tuple[tuple[str, ...], tuple[str, ..
     if args.command == "eigs":
         return ("eigs.npz", "eigs.ply") + tuple(f"eigs.{e}" for e in png), ()
     return ("comparison.md", "comparison.csv") + tuple(f"comparison.{e}" for e in png), ()
+
+
+def cmd_compare(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir) -> int:
+    """``stiefel compare-smoothings`` (``cli.compare``)."""
+    from .compare import cmd_compare as run_compare
+
+    return run_compare(args, argv, run)

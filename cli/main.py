@@ -53,7 +53,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import gc
-import math
 import os
 import signal
 import sys
@@ -62,7 +61,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterator, NoReturn, Sequence
 
 # only light modules here: whatever the commands need is imported inside ``main``, where an interrupt is handled
-from .outputs import INT_MAX, PROG, bounded_int, parse_mu, stderr_line
+from .outputs import INT_MAX, PROG, bounded_int, stderr_line
 
 __all__ = ["main", "build_parser"]
 
@@ -95,25 +94,17 @@ def _checked(parse: Callable[[str], Any]) -> Callable[[str], Any]:
     return check
 
 
-_mu_type = _checked(parse_mu)
 #: integer options are capped at a C int (``--max-iters 99999999999`` overflowed deep inside)
 _positive_int = _checked(bounded_int(1, INT_MAX))
 _seed_type = _checked(bounded_int(0, 2**32 - 1))
 
 
-def _positive_float(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
-    if not (math.isfinite(v) and v > 0):
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
-    return v
-
-
 def _common(p: argparse.ArgumentParser, k_default: int) -> None:
+    from .options import add_laplacian_options
+
     p.add_argument("mesh", nargs="?", default=None,
-                   help="mesh file (OBJ/OFF/PLY/STL); default: the built-in demo mesh")
+                   help="mesh file (OBJ/OFF/PLY/STL), or example:NAME for a generated example (bumpy, starfish, "
+                        "torus, patch: mesh.examples); default: the built-in demo mesh (example:bumpy)")
     p.add_argument("-k", type=_positive_int, default=k_default, help=f"number of modes (default {k_default})")
     p.add_argument("--out", type=Path, default=None, help="output directory (created; default: ./stiefel-<command>)")
     p.add_argument("--seed", type=_seed_type, default=0, help="random seed, 0 … 2³²−1 (default 0)")
@@ -122,55 +113,58 @@ def _common(p: argparse.ArgumentParser, k_default: int) -> None:
     p.add_argument("--cache-dir", type=Path, default=None,
                    help="JAX compilation cache (default: $STIEFEL_CACHE_DIR, else the user cache directory)")
     p.add_argument("--no-cache", action="store_true", help="compile without the persistent compilation cache")
-    p.add_argument("--laplacian", choices=("cotangent", "robust"), default="cotangent",
-                   help="cotangent (default) or robust: intrinsic Delaunay on the tufted cover "
-                        "(non-negative weights; loads non-manifold meshes)")
-
-
-def _cmm_options(p: argparse.ArgumentParser, gtol: float) -> None:
-    p.add_argument("--mu", type=_mu_type, default=parse_mu("0.01n"),
-                   help="sparsity weight μ: absolute (5.2) or relative to the vertex count (0.01n); default 0.01n")
-    p.add_argument("--weighting", choices=("area", "uniform"), default="area", help="ℓ1 weights (default area)")
-    p.add_argument("--max-iters", type=_positive_int, default=5000,
-                   help="iteration cap of every solver, ≤ 2³¹−1 (default 5000)")
-    p.add_argument("--gtol", type=_positive_float, default=None,
-                   help=f"gradient tolerance of the block/sequential solvers (default {gtol})")
+    add_laplacian_options(p)
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``stiefel`` argument parser (subcommands ``modes``, ``eigs``, ``compare-smoothings``)."""
-    from . import commands as c
+    from . import options as o
 
     parser = _Parser(prog=PROG, description="Compressed manifold modes and Laplacian eigenpairs on triangle meshes.",
                      epilog="examples: stiefel modes -k 6 --out out/ | stiefel modes mesh.obj -k 10 --mu 0.05n "
-                            "--json --out out/ | stiefel eigs mesh.off -k 20 --out eigs/")
+                            "--json --out out/ | stiefel modes example:starfish --smoothing huber --start random | "
+                            "stiefel eigs mesh.off -k 20 --out eigs/")
     sub = parser.add_subparsers(dest="command", required=True, metavar="{modes,eigs,compare-smoothings}",
                                 parser_class=_Parser)
     p = sub.add_parser("modes", help="compressed manifold modes: npz, PLY, PNG, summary.json")
     _common(p, 10)
-    _cmm_options(p, c.GTOL)
-    p.add_argument("--method", choices=c.METHODS, default="block", help="solver (default block)")
-    p.add_argument("--smoothing", choices=c.SMOOTHINGS, default="f6", help="ℓ1 smoothing (default f6)")
+    o.add_cmm_options(p, single_smoothing=True)
+    p.add_argument("--method", choices=o.METHODS, default="block", help="solver (default block)")
+    p.add_argument("--start", type=_checked(o.start_spec), default="eigen", metavar="{eigen,random,FILE}",
+                   help="start: the first k eigenfunctions (default), random, or a .npy/.npz file with an (n, k) "
+                        "array (e.g. an earlier run's modes.npz)")
     p.add_argument("--samples", type=_positive_int, default=None,
                    help="local functions for --method fast (default: max(10k, n/10))")
     p.add_argument("--no-png", action="store_true", help="skip the PNG contact sheet")
     p.add_argument("--ascii-ply", action="store_true", help="write modes.ply as ASCII (default: binary little-endian)")
-    p.set_defaults(run=c.cmd_modes)
+    p.set_defaults(run=_command("cmd_modes"))
 
     p = sub.add_parser("eigs", help="first k Laplacian eigenpairs: npz, PLY, PNG, summary.json")
     _common(p, 10)
     p.add_argument("--no-png", action="store_true", help="skip the PNG contact sheet")
     p.add_argument("--ascii-ply", action="store_true", help="write eigs.ply as ASCII (default: binary little-endian)")
-    p.set_defaults(run=c.cmd_eigs)
+    p.set_defaults(run=_command("cmd_eigs"))
 
     p = sub.add_parser("compare-smoothings", help="f0…f9 from the same start: markdown table, CSV and a figure")
     _common(p, 4)
-    _cmm_options(p, c.GTOL)
+    o.add_cmm_options(p, single_smoothing=False)
     p.add_argument("--method", choices=("block", "sequential"), default="block", help="solver (default block)")
-    p.add_argument("--smoothings", default=",".join(c.SMOOTHINGS), help="comma-separated subset (default f0,…,f9)")
-    p.add_argument("--no-png", action="store_true", help="skip comparison.png (first mode of each smoothing)")
-    p.set_defaults(run=c.cmd_compare)
+    p.add_argument("--smoothings", type=_checked(o.smoothing_list), default=list(o.SMOOTHING_NAMES),
+                   metavar="NAMES", help="comma-separated names or aliases (default: all ten, f0,…,f9)")
+    p.add_argument("--no-png", action="store_true", help="skip comparison.png (smoothing × mode grid)")
+    p.set_defaults(run=_command("cmd_compare"))
     return parser
+
+
+def _command(name: str) -> Callable:
+    """The subcommand ``cli.commands.<name>``, imported when it runs (``--help`` stays light)."""
+
+    def run(args: argparse.Namespace, argv: Sequence[str] | None, run_dir: Any) -> int:
+        from . import commands
+
+        return getattr(commands, name)(args, argv, run_dir)
+
+    return run
 
 
 # ---------------------------------------------------------------------------- entry point
@@ -180,13 +174,19 @@ def _run(args: argparse.Namespace, argv: Sequence[str] | None, check: Callable[[
     """Check the cheap inputs and ``--out`` (locked, claimed) before loading or solving anything; run.
 
     ``check`` raises ``KeyboardInterrupt`` if an interrupt came; the commit calls it first."""
-    from .commands import CLIError, outputs_of, smoothing_names
+    from .commands import EXAMPLE_PREFIX, CLIError, example_name, outputs_of
+    from .options import check_applicable
     from .run_dir import RunDir
 
     if args.mesh is not None and not Path(args.mesh).is_file():
-        raise CLIError(f"mesh file not found: {args.mesh}")
-    if args.command == "compare-smoothings":
-        smoothing_names(args.smoothings)
+        if not args.mesh.startswith(EXAMPLE_PREFIX):
+            raise CLIError(f"mesh file not found: {args.mesh}")
+        example_name(args.mesh)
+    if hasattr(args, "method"):
+        try:
+            check_applicable(args, args.method)
+        except ValueError as e:
+            raise CLIError(str(e)) from None
     out = args.out if args.out is not None else Path(f"stiefel-{args.command}")
     outputs, owned = outputs_of(args)
     with RunDir(out, args.command, outputs=outputs, owned=owned, check=check) as run:

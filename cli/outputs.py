@@ -22,39 +22,50 @@ PROG = "stiefel"
 #: the largest integer option the CLI accepts (a C ``int``; larger values overflow deep inside)
 INT_MAX = 2**31 - 1
 
-_MU_RE = re.compile(r"^\s*([0-9]*\.?[0-9]+(?:[eE][+-]?[0-9]+)?)\s*(n?)\s*$")
+_MU_RE = re.compile(r"^\s*([0-9]*\.?[0-9]+(?:[eE][+-]?[0-9]+)?)\s*(n|λ|lambda|lam|)\s*$")
 
 
 class MuSpec:
-    """A sparsity weight as given on the command line: absolute (``"5.2"``) or relative (``"0.01n"``).
+    """A sparsity weight as given on the command line: absolute (``"5.2"``), relative to the vertex
+    count (``"0.01n"``) or to the spectrum (``"2λ"``, also written ``2lambda``/``2lam``).
 
-    ``resolve(n)`` gives the absolute μ: ``value`` or ``value · n`` (n = number of vertices).
+    ``resolve(n, lam)`` gives the absolute μ: ``value``, ``value · n`` (n = number of vertices) or
+    ``value · λ`` with ``λ = λ_{k−1}``, the largest of the first k Laplacian eigenvalues (``Wφ = λAφ``,
+    areas normalised to total 1): the scale of the Dirichlet energy of the k modes sought, so ``2λ``
+    asks for the same balance of smoothness and sparsity on a coarse and a fine mesh of one shape.
     """
 
-    def __init__(self, text: str, value: float, relative: bool) -> None:
-        self.text, self.value, self.relative = text, value, relative
+    def __init__(self, text: str, value: float, unit: str) -> None:
+        self.text, self.value, self.unit = text, value, unit
+        self.relative = unit == "n"  # (kept: summary.json's mu.relative)
 
-    def resolve(self, n: int) -> float:
-        """Absolute μ for a mesh with ``n`` vertices."""
-        return self.value * n if self.relative else self.value
+    def resolve(self, n: int, lam: float | None = None) -> float:
+        """Absolute μ for a mesh with ``n`` vertices (and ``lam`` = λ_{k−1} when the unit is λ)."""
+        if self.unit == "λ":
+            if lam is None:
+                raise ValueError(f"mu {self.text!r} is relative to λ_(k−1): the eigenvalue is needed")
+            return self.value * float(lam)
+        return self.value * n if self.unit == "n" else self.value
 
     def __repr__(self) -> str:
         return f"MuSpec({self.text!r})"
 
 
 def parse_mu(text: str) -> MuSpec:
-    """Parse ``"5.2"``, ``"1e-3"`` or ``"0.01n"``; raise ``ValueError`` naming the fix otherwise.
+    """Parse ``"5.2"``, ``"1e-3"``, ``"0.01n"`` or ``"2λ"`` (``2lambda``, ``2lam``); raise ``ValueError``
+    naming the fix otherwise.
 
     Used as an argparse ``type=``: argparse turns the error into a usage error (exit 2).
     """
     m = _MU_RE.match(text)
     if m is None:
-        raise ValueError(f"invalid mu {text!r}: give a non-negative number (e.g. 5.2) "
-                         "or a multiple of the vertex count (e.g. 0.01n)")
+        raise ValueError(f"invalid mu {text!r}: give a non-negative number (e.g. 5.2), a multiple of the vertex "
+                         "count (e.g. 0.01n) or of the k-th Laplacian eigenvalue λ_(k−1) (e.g. 2λ or 2lambda)")
     value = float(m.group(1))
     if not math.isfinite(value):
         raise ValueError(f"invalid mu {text!r}: must be finite")
-    return MuSpec(text, value, bool(m.group(2)))
+    unit = {"": "", "n": "n"}.get(m.group(2), "λ")
+    return MuSpec(text, value, unit)
 
 
 def bounded_int(low: int, high: int = INT_MAX) -> Callable[[str], int]:

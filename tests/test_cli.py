@@ -104,7 +104,8 @@ def test_modes_demo_mesh(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     assert diag["status"] in ("converged", "max_iters") and np.isfinite(diag["objective"])
     summary = json.loads((out / "summary.json").read_text())
     assert summary["mu"] == pytest.approx(0.01 * V.shape[0])
-    assert summary["parameters"]["mu"] == {"given": "0.01n", "relative": True, "value": summary["mu"]}
+    assert summary["parameters"]["mu"] == {"given": "0.01n", "relative": True, "unit": "times the vertex count",
+                                           "value": summary["mu"]}
     assert summary["mesh"]["source"].startswith("demo:")
     for lib in ("python", "jax", "numpy", "scipy", "stiefel-cmm"):
         assert summary["versions"][lib]
@@ -158,7 +159,7 @@ def test_compare_smoothings_subset(tmp_path: Path) -> None:
     assert main(["compare-smoothings", str(HAND), "-k", "3", "--smoothings", "f3,f6", "--quiet", *FAST,
                  "--out", str(out)]) == 0
     csv = (out / "comparison.csv").read_text().splitlines()
-    assert csv[0].startswith("smoothing,c1_at_zero,status,objective,dirichlet,l1")
+    assert csv[0].startswith("smoothing,name,c1_at_zero,status,objective,dirichlet,l1")
     assert [line.split(",")[0] for line in csv[1:]] == ["f3", "f6"]
     md = (out / "comparison.md").read_text()
     assert "| f6 | True |" in md
@@ -247,7 +248,9 @@ def test_subprocess_module(tmp_path: Path) -> None:
     proc = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     summary = json.loads(proc.stdout)
-    assert summary["mu"] == pytest.approx(0.01 * summary["mesh"]["n_vertices"])
+    # the default μ = 2λ_(k−1)
+    assert summary["parameters"]["mu"]["given"] == "2λ"
+    assert summary["mu"] == pytest.approx(2 * summary["parameters"]["mu"]["eigenvalue"])
     assert (out / "modes.npz").is_file() and not (out / "modes.png").exists()
     bad = subprocess.run([sys.executable, "-m", "cli.main", "modes", "--mu", "abc"], cwd=REPO,
                          capture_output=True, text=True, timeout=60)
