@@ -51,10 +51,11 @@ import numpy as np  # noqa: E402
 import scipy  # noqa: E402
 
 import mesh  # noqa: E402
+from bench.meshes import load_mesh  # noqa: E402
 from objectives import bases, fmaps  # noqa: E402
 
 MESHES = Path(__file__).resolve().parents[1].parent / "shared" / "meshes"
-BASES_MESHES = ["bunny.off", "fandisk.off", "camelhead.off", "armadillo_25479.obj"]
+BASES_MESHES = ["example:starfish", "example:torus", "example:bumpy", "example:patch"]  # --meshes: any
 KS = [50, 150]
 MU_R = 1e6
 MU_PERP = 1e6
@@ -78,7 +79,7 @@ def _best(fn, repeats):
 def bench_bases(names, ks, repeats, skip):
     rows = []
     for name in names:
-        m = mesh.load(MESHES / name, warn=False)
+        m, _ = load_mesh(name)
         lap = mesh.laplacian(m)
         t_phi, (_, Phi) = _best(lambda: mesh.eigenbasis(lap, R_PHI), 1)
         _, v, _ = bases.region_from_reconstruction(lap.A, Phi, mesh.vertex_positions(m), method="manipulation")
@@ -105,7 +106,7 @@ def _descriptors(lam, Phi):
 
 
 def bench_fmap(name, k, seed=0):
-    m = mesh.load(MESHES / name, warn=False)
+    m, _ = load_mesh(name)
     perm = np.random.default_rng(seed).permutation(m.n_vertices)
     mp = mesh.permute(m, perm)
     out = dict(mesh=name, n=m.n_vertices, k=k)
@@ -208,16 +209,17 @@ def write_report(path, rows, fm, args, total, load):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", default="bench/RESULTS_bases.md")
-    ap.add_argument("--quick", action="store_true", help="bunny only, k = 50, no functional map")
+    ap.add_argument("--meshes", nargs="+", default=BASES_MESHES,
+                    help="example:NAME, paths or names in ../shared/meshes (the committed results: bunny.off "
+                         "fandisk.off camelhead.off armadillo_25479.obj)")
+    ap.add_argument("--quick", action="store_true", help="the first mesh only, k = 50, no functional map")
     ap.add_argument("--repeats", type=int, default=1)
     ap.add_argument("--skip-k150-largest", action="store_true",
                     help="skip k = 150 on armadillo_25479 (the slowest case)")
     args = ap.parse_args(argv)
-    if not MESHES.is_dir():
-        sys.exit(f"shared meshes not found at {MESHES}")
     load = os.getloadavg()[0]
     t0 = time.perf_counter()
-    names, ks = (["bunny.off"], [50]) if args.quick else (BASES_MESHES, KS)
+    names, ks = (args.meshes[:1], [50]) if args.quick else (args.meshes, KS)
     skip = {("armadillo_25479.obj", 150)} if args.skip_k150_largest else set()
     rows = bench_bases(names, ks, args.repeats, skip)
     fm = None if args.quick else bench_fmap(FMAP_MESH, FMAP_K)

@@ -33,6 +33,7 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import mesh  # noqa: E402
+from bench.meshes import load_mesh  # noqa: E402
 from bench.environment import run_meta  # noqa: E402
 from objectives.batch import cmm_batch, cmm_problem, default_options  # noqa: E402
 
@@ -82,7 +83,7 @@ def profile_pieces(lap, k, B):
 
 
 def run_mesh(name, args):
-    m = mesh.load(MESHES / name)
+    m, _ = load_mesh(name)
     lap = mesh.laplacian(m, weights="cotangent", area="lumped")
     n, k, B = lap.n, args.k, args.batch
     opts = default_options(max_iters=args.iters, gtol=0.0, ftol=0.0)
@@ -158,7 +159,7 @@ def _table(result):
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--meshes", nargs="+", default=["hand_868.obj", "bunny.off"])
+    p.add_argument("--meshes", nargs="+", default=["example:starfish", "example:torus"])
     p.add_argument("-k", type=int, default=10)
     p.add_argument("--batch", type=int, default=8)
     p.add_argument("--iters", type=int, default=60)

@@ -47,6 +47,7 @@ import numpy as np  # noqa: E402
 import scipy  # noqa: E402
 
 import mesh  # noqa: E402
+from bench.meshes import load_mesh  # noqa: E402
 from objectives.cmm import compressed_modes, first_eigenpairs  # noqa: E402
 from objectives.cmm_solvers import ADMMCMM, BlockCMM, SequentialCMM  # noqa: E402
 from stiefel.sparse_factor import default_backend  # noqa: E402
@@ -81,7 +82,7 @@ def _admm_run(lap, k, mu, rho, budget, start="eigen", seed=0):
 
 
 def run_mesh(name, args):
-    m = mesh.load(MESHES / name)
+    m, _ = load_mesh(name)
     lap = mesh.laplacian(m, weights="cotangent", area="lumped")
     n, k = lap.n, args.k
     mu = args.mu_factor * n
@@ -202,7 +203,7 @@ def _markdown_other_baselines(rows, fmt):
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--meshes", nargs="+", default=["bunny.off", "fandisk.off", "camelhead.off", "armadillo_25479.obj"])
+    p.add_argument("--meshes", nargs="+", default=["example:starfish", "example:torus", "example:patch"])
     p.add_argument("-k", type=int, default=10)
     p.add_argument("--mu-factor", type=float, default=0.01)
     p.add_argument("--rho-factor", type=float, default=3.0)

@@ -33,6 +33,7 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import mesh  # noqa: E402
+from bench.meshes import load_mesh  # noqa: E402
 from bench.environment import run_meta  # noqa: E402
 import stiefel  # noqa: E402
 from objectives.admm import l1_weights_np  # noqa: E402
@@ -76,7 +77,7 @@ def run_sequential(lap, k, mu, dtype, args):
 
 
 def run_mesh(name, args):
-    m = mesh.load(MESHES / name)
+    m, _ = load_mesh(name)
     lap = mesh.laplacian(m, weights="cotangent", area="lumped")
     W, a = lap.W, np.asarray(lap.A.diagonal())
     n, k = lap.n, args.k
@@ -131,7 +132,7 @@ def markdown(meta, results):
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--meshes", nargs="+", default=["bunny.off", "fandisk.off"])
+    p.add_argument("--meshes", nargs="+", default=["example:bumpy", "example:torus"])
     p.add_argument("-k", type=int, default=10)
     p.add_argument("--mu-factor", type=float, default=0.01)
     p.add_argument("--gtol", type=float, default=1e-6)

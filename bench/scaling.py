@@ -76,9 +76,9 @@ def subdivided(base: str, level: int, cache: Path) -> tuple[np.ndarray, np.ndarr
     if path.exists():
         z = np.load(path)
         return z["V"], z["F"], True
-    import mesh
+    from bench.meshes import load_mesh
 
-    m = mesh.load(MESHES / base if not Path(base).exists() else base, warn=False)
+    m, _ = load_mesh(base)
     tm = trimesh.Trimesh(m.vertices, m.faces, process=False)
     for _ in range(level):
         tm = tm.subdivide()
@@ -441,7 +441,8 @@ def _predict(row, prior, rows):
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--base", default="bunny.off", help="a mesh in ../shared/meshes or a path")
+    p.add_argument("--base", default="example:bumpy",
+                   help="example:NAME, a path or a mesh in ../shared/meshes (the committed results: bunny.off)")
     p.add_argument("--levels", type=int, nargs="+", default=[1, 2, 3, 4])
     p.add_argument("--ks", type=int, nargs="+", default=[10, 50])
     p.add_argument("--iters", type=int, default=20, help="fixed iterations for the per-iteration timing")

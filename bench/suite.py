@@ -79,14 +79,9 @@ REL = 1e-3
 
 
 def load_mesh(spec: str):
-    if spec == "demo":
-        from cli.demo_mesh import DEMO_NAME, demo_mesh
+    from bench.meshes import load_mesh as load
 
-        return mesh.load(demo_mesh()), DEMO_NAME
-    path = Path(spec)
-    if not path.exists():
-        path = MESHES / spec
-    return mesh.load(path, warn=False), path.name
+    return load(spec)
 
 
 def first_time_within(times, values, target, rel=REL):
@@ -400,7 +395,8 @@ def markdown(meta, res, args) -> str:
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--mesh", default="fandisk.off", help="a mesh in ../shared/meshes, a path, or 'demo'")
+    p.add_argument("--mesh", default="example:starfish",
+                   help="example:NAME (generated), 'demo', a path, or a mesh name in ../shared/meshes")
     p.add_argument("-k", type=int, default=10)
     p.add_argument("--mu-factor", type=float, default=0.01)
     p.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)

@@ -11,7 +11,6 @@ import pytest
 from bench import __main__ as dispatcher
 
 ROOT = Path(__file__).resolve().parents[1]
-HAND = ROOT.parent / "shared" / "meshes" / "hand_868.obj"
 
 
 def test_list_names_every_benchmark():
@@ -36,11 +35,21 @@ def test_missing_module_and_unknown_name_are_named(monkeypatch, capsys):
     assert "unknown benchmark 'no-such-name'" in capsys.readouterr().err
 
 
-@pytest.mark.skipif(not HAND.exists(), reason="shared meshes not available")
+def test_bench_meshes_resolve_without_shared(tmp_path, monkeypatch):
+    from bench import meshes
+
+    monkeypatch.setattr(meshes, "SHARED", tmp_path / "nowhere")
+    m, label = meshes.load_mesh("example:torus")
+    assert label == "example:torus" and m.n_vertices == 1728
+    assert meshes.load_mesh("demo")[0].n_vertices == 2562
+    with pytest.raises(FileNotFoundError, match="'hand_868.obj' not found .* example:bumpy"):
+        meshes.load_mesh("hand_868.obj")
+
+
 def test_tiny_suite_writes_consistent_results(tmp_path):
     out_json, out_md = tmp_path / "suite.json", tmp_path / "suite.md"
     methods = ["block-cg-cholesky", "block-bb-cholesky", "admm", "fast", "eigsh", "block-cg-mu0"]
-    rc = dispatcher.main(["suite", "--mesh", str(HAND), "-k", "3", "--repeats", "1", "--max-iters", "25",
+    rc = dispatcher.main(["suite", "-k", "3",  # the default mesh: example:starfish, no file needed "--repeats", "1", "--max-iters", "25",
                           "--admm-iters", "40", "--fast-samples", "40", "--methods", *methods,
                           "--out-json", str(out_json), "--out-md", str(out_md)])
     assert rc == 0
@@ -48,7 +57,7 @@ def test_tiny_suite_writes_consistent_results(tmp_path):
     meta, setup, rows = res["meta"], res["setup"], res["rows"]
     assert meta["jax_backend"] and meta["device"] and meta["versions"]["jax"]
     assert meta["command"].startswith("python -m bench suite")
-    assert setup["n"] == 868 and setup["k"] == 3
+    assert setup["n"] == 2562 and setup["k"] == 3
     assert list(rows) == methods
     for name, r in rows.items():
         assert np.isfinite(r["objective"]) and r["wall_time"] >= 0 and r["compile_time"] >= 0
@@ -66,7 +75,7 @@ def test_tiny_suite_writes_consistent_results(tmp_path):
     assert rows["block-cg-mu0"]["objective"] >= ref * (1 - 1e-10)
     assert rows["block-cg-mu0"]["objective"] <= ref * (1 + 1e-3)  # and gets close within 25 iterations
     md = out_md.read_text()
-    assert "hand_868.obj" in md and "no GPU" in md or meta["gpu"]
+    assert "example:starfish" in md and "no GPU" in md or meta["gpu"]
     for name in methods:
         assert f"| {name}" in md
 
