@@ -154,6 +154,19 @@ def _picture(run: RunDir, name: str, fill: Callable[[Path], object]) -> str | No
     return None
 
 
+def _viewer(args: argparse.Namespace, run: RunDir, name: str, m: Any, fields: Any, names: list[str],
+            subtitles: list[str], title: str) -> dict | None:
+    """With ``--html``: stage the interactive viewer ``name`` (``cli.viewer.write_viewer``); what it shows."""
+    if not getattr(args, "html", False):
+        return None
+    from .viewer import write_viewer
+
+    info: dict = {}
+    run.write("html", name, lambda fh: info.update(write_viewer(fh, m.vertices, m.faces, fields, names, title=title,
+                                                                 subtitles=subtitles)))
+    return info
+
+
 def _interrupted_solve(args: argparse.Namespace, status: str) -> dict | None:
     """For a solve that stopped on Ctrl-C/SIGTERM (status ``interrupted``): take the signal over from
     ``cli.main`` (the outputs are written, a second signal still aborts them) and describe it."""
@@ -279,6 +292,9 @@ def cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir)
         fh, modes=res.modes, compressed_eigenvalues=res.compressed_eigenvalues, vertices=m.vertices,
         faces=m.faces, mu=mu, diagnostics=json.dumps(to_jsonable(diag)), parameters=json.dumps(to_jsonable(params))))
     run.write("ply", "modes.ply", lambda fh: write_ply(fh, m.vertices, m.faces, res.modes, ascii=args.ascii_ply))
+    viewer = _viewer(args, run, "modes.html", m, res.modes, [f"mode {j}" for j in range(args.k)],
+                     [f"λ̃ = {lam:.6g} · support {100 * s:.1f} %" for lam, s in zip(res.compressed_eigenvalues, support)],
+                     f"{mesh_info['source']}: compressed manifold modes (μ = {mu:.4g})")
     picture_error = None
     if not args.no_png:
         from .render import contact_sheet
@@ -293,6 +309,8 @@ def cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir)
                    partial_results=_PARTIAL_NOTE if partial is None else "modes.partial.npz during the solve")
     if interrupt is not None:
         summary["interrupted"] = interrupt
+    if viewer is not None:
+        summary["viewer"] = viewer
     if picture_error:
         summary["picture_error"] = picture_error
     timings["write_s"] = time.perf_counter() - t  # the commit (summary.json and the move) is not included
@@ -352,6 +370,8 @@ def cmd_eigs(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir) 
                                                                 vertices=m.vertices, faces=m.faces))
     run.write("ply", "eigs.ply", lambda fh: write_ply(fh, m.vertices, m.faces, evecs,
                                                       [f"eig_{j}" for j in range(args.k)], ascii=args.ascii_ply))
+    viewer = _viewer(args, run, "eigs.html", m, evecs, [f"eigenfunction {j}" for j in range(args.k)],
+                     [f"λ = {lam:.6g}" for lam in evals], f"{mesh_info['source']}: Laplacian eigenfunctions")
     picture_error = None
     if not args.no_png:
         from .render import contact_sheet
@@ -364,6 +384,8 @@ def cmd_eigs(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir) 
                    eigenvalues=evals, diagnostics={"orthogonality": orth, "max_residual": resid},
                    timings={"compile_s": 0.0, "solve_s": t_eig, "setup_s": t_setup,
                             "write_s": time.perf_counter() - t, "total_s": time.perf_counter() - t_all})
+    if viewer is not None:
+        summary["viewer"] = viewer
     if picture_error:
         summary["picture_error"] = picture_error
     _finish(args, run, summary)
@@ -374,7 +396,7 @@ def cmd_eigs(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir) 
 
 def outputs_of(args: argparse.Namespace) -> tuple[tuple[str, ...], tuple[str, ...]]:
     """``(names this run may write, names the command always owns)`` for ``RunDir``."""
-    png = () if getattr(args, "no_png", True) else ("png",)
+    png = (() if getattr(args, "no_png", True) else ("png",)) + (("html",) if getattr(args, "html", False) else ())
     if args.command == "modes":
         return ("modes.npz", "modes.ply") + tuple(f"modes.{e}" for e in png), (PARTIAL, PARTIAL + PartialColumns.TMP_SUFFIX)
     if args.command == "eigs":

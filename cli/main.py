@@ -2,16 +2,24 @@
 
 Subcommands::
 
-    stiefel modes [MESH] -k 10 --mu 0.01n --method block --smoothing f6 --out DIR
-    stiefel eigs [MESH] -k 10 --out DIR
-    stiefel compare-smoothings [MESH] -k 4 --mu 0.01n --out DIR
+    stiefel modes [MESH] -k 10 --mu 2λ --method block --smoothing huber --start eigen --out DIR [--html]
+    stiefel eigs [MESH] -k 10 --out DIR [--html]
+    stiefel compare-smoothings [MESH] -k 4 --smoothings huber,logcosh,f3 --out DIR
+    stiefel view DIR [--output FILE]
 
-Without ``MESH`` the built-in demo surface is used (``cli.demo_mesh``). ``--mu``
-is absolute (``5.2``) or relative to the vertex count (``0.01n`` = 0.01·n); the
-resolved absolute μ is recorded in ``summary.json``. Progress goes to stdout, one
+Without ``MESH`` the built-in demo surface is used (``cli.demo_mesh``); ``example:NAME`` picks a
+generated example (``mesh.examples``). ``--mu`` is absolute (``5.2``), relative to the vertex count
+(``0.01n`` = 0.01·n) or to λ_(k−1), the largest of the first k Laplacian eigenvalues (``2λ``, the
+default, also written ``2lambda``); the resolved absolute μ is recorded in ``summary.json``.
+``--target-sparsity S`` chooses μ instead (``objectives.select_mu``). The options carry the API's
+names (``cli.options``: ``--weights``, ``--area``, ``--smoothing`` with any alias, ``--eps``,
+``--delta``, ``--continuation``, ``--optimizer``, ``--preconditioner``, ``--start``); an option the
+chosen method does not have is refused before any work. Progress goes to stdout, one
 line per stage, and the solver's progress to stderr (a bar on a terminal, a line every
 2 s otherwise; none of either with ``--quiet``); ``--json`` prints exactly one JSON object
-(the summary) on stdout and nothing else there.
+(the summary) on stdout and nothing else there. ``stiefel view`` (``cli.viewer``) writes an
+interactive, self-contained HTML viewer of a ``modes`` or ``eigs`` run; ``--html`` writes it with
+the run (``modes.html`` / ``eigs.html``).
 
 Compilation is cached across runs in JAX's persistent cache (``cli.cache``: ``--cache-dir``,
 ``$STIEFEL_CACHE_DIR``, ``--no-cache``); ``summary.json``'s ``timings`` separate ``compile_s``,
@@ -22,7 +30,7 @@ Compilation is cached across runs in JAX's persistent cache (``cli.cache``: ``--
 ``--method`` picks the solver object of ``objectives.cmm_solvers`` (``block`` →
 ``BlockCMM``, ``sequential`` → ``SequentialCMM``, ``admm`` → ``ADMMCMM``,
 ``admm_sequential`` → ``SequentialADMMCMM``, ``fast`` → ``FastCMM``). ``--max-iters``
-reaches every solver; ``--smoothing`` and ``--gtol`` the manifold solvers (the ADMM
+reaches every solver; ``--smoothing``, ``--gtol`` and the smoothing options the manifold solvers (the ADMM
 solvers stop on their residual tolerances ``eps_abs``/``eps_rel``); ``--samples`` sets the
 local functions of ``fast``. ``summary.json`` records the options passed
 (``solver_options``) and all of the solver's options (``parameters``).
@@ -124,7 +132,7 @@ def build_parser() -> argparse.ArgumentParser:
                      epilog="examples: stiefel modes -k 6 --out out/ | stiefel modes mesh.obj -k 10 --mu 0.05n "
                             "--json --out out/ | stiefel modes example:starfish --smoothing huber --start random | "
                             "stiefel eigs mesh.off -k 20 --out eigs/")
-    sub = parser.add_subparsers(dest="command", required=True, metavar="{modes,eigs,compare-smoothings}",
+    sub = parser.add_subparsers(dest="command", required=True, metavar="{modes,eigs,compare-smoothings,view}",
                                 parser_class=_Parser)
     p = sub.add_parser("modes", help="compressed manifold modes: npz, PLY, PNG, summary.json")
     _common(p, 10)
@@ -137,12 +145,16 @@ def build_parser() -> argparse.ArgumentParser:
                    help="local functions for --method fast (default: max(10k, n/10))")
     p.add_argument("--no-png", action="store_true", help="skip the PNG contact sheet")
     p.add_argument("--ascii-ply", action="store_true", help="write modes.ply as ASCII (default: binary little-endian)")
+    p.add_argument("--html", action="store_true",
+                   help="also write modes.html, an interactive viewer (one self-contained file; stiefel view does it later)")
     p.set_defaults(run=_command("cmd_modes"))
 
     p = sub.add_parser("eigs", help="first k Laplacian eigenpairs: npz, PLY, PNG, summary.json")
     _common(p, 10)
     p.add_argument("--no-png", action="store_true", help="skip the PNG contact sheet")
     p.add_argument("--ascii-ply", action="store_true", help="write eigs.ply as ASCII (default: binary little-endian)")
+    p.add_argument("--html", action="store_true",
+                   help="also write eigs.html, an interactive viewer (one self-contained file; stiefel view does it later)")
     p.set_defaults(run=_command("cmd_eigs"))
 
     p = sub.add_parser("compare-smoothings", help="f0…f9 from the same start: markdown table, CSV and a figure")
@@ -153,6 +165,10 @@ def build_parser() -> argparse.ArgumentParser:
                    metavar="NAMES", help="comma-separated names or aliases (default: all ten, f0,…,f9)")
     p.add_argument("--no-png", action="store_true", help="skip comparison.png (smoothing × mode grid)")
     p.set_defaults(run=_command("cmd_compare"))
+
+    from .viewer import add_parser as add_view
+
+    add_view(sub)
     return parser
 
 
@@ -199,6 +215,15 @@ def _main(argv: Sequence[str] | None, signals: _Signals) -> int:
         args = parser.parse_args(argv)
     except SystemExit as e:  # argparse: -h (0) or a usage error (2, already reported)
         return int(e.code or 0)
+    if args.command == "view":  # reads a run directory and writes one HTML file: no JAX, no RunDir
+        from .viewer import ViewerError, run_view
+
+        signals.check()
+        try:
+            return run_view(args)
+        except ViewerError as e:
+            stderr_line(f"{PROG}: error: {e}")
+            return 1
 
     import jax
 

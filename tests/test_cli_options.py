@@ -131,3 +131,26 @@ def test_target_sparsity(tmp_path: Path) -> None:
     assert mu["target_sparsity"] == 0.5 and mu["value"] == s["mu"] and len(mu["trials"]) >= 2
     # select_mu's tolerance (0.02) is met unless its budget ran out
     assert abs(s["diagnostics"]["sparsity"]["1e-3"] - 0.5) <= 0.02 or len(mu["trials"]) == 12
+
+
+def test_html_viewer_with_the_run_and_stiefel_view(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    out = tmp_path / "h"
+    assert main(["eigs", SMALL, "-k", "3", "--html", "--no-png", "--quiet", "--out", str(out)]) == 0
+    s = _summary(out)
+    assert s["files"]["html"]["name"] == "eigs.html" and s["viewer"]["vertices"] == 1681
+    page = (out / "eigs.html").read_text()
+    assert "eigenfunction 2" in page and "<script" in page and 'src="http' not in page
+    # stiefel view on the same directory: view.html next to the run's files, not listed by (nor blocking) the run
+    assert main(["view", str(out), "--quiet"]) == 0
+    assert (out / "view.html").is_file()
+    assert main(["eigs", SMALL, "-k", "3", "--html", "--no-png", "--quiet", "--out", str(out)]) == 0
+    # a directory without a run, and a run whose npz does not match its mesh: one-line named errors
+    assert main(["view", str(tmp_path)]) == 1
+    assert "no modes.npz or eigs.npz" in _error(capsys)
+    z = dict(np.load(out / "eigs.npz"))
+    z["eigenvectors"] = z["eigenvectors"][:-1]
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    np.savez(bad / "eigs.npz", **z)
+    assert main(["view", str(bad)]) == 1
+    assert "1680" in _error(capsys) and not (bad / "view.html").exists()
