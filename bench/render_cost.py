@@ -5,7 +5,12 @@ Fields: the first ``k`` Laplacian eigenvectors (``mesh.eigenbasis``), as ``stief
 Each repeat draws the old sheet and then the new one (interleaved, so that load from other processes
 hits both alike); the table gives the median and the best wall-clock seconds, and the best CPU seconds
 of this process (``time.process_time``), per mesh. The new renderer's text cache is cleared before each
-of its repeats (a real run draws new titles). Row titles are like ``stiefel modes``'s.
+of its repeats (a real run draws new titles). Row titles are like ``stiefel modes``'s. A second table
+splits the new renderer's CPU time into stages (orientation and views, rasterisation with the
+interpolation matrices, colouring and pasting, layout, text, PNG encoding). First, the time of the
+first sheet in a fresh process that has imported the CLI, as in a ``stiefel`` run: the renderer's own
+imports included (the former one imports matplotlib's Figure machinery; the new one no matplotlib at
+all for the default colormap).
 
     python -m bench render-cost                                   # the demo mesh at 2.5K, 10K and 41K vertices
     python -m bench render-cost --meshes ../shared/meshes/fandisk.off ../shared/meshes/camelhead.off \\
@@ -71,7 +76,76 @@ def _time(fn) -> tuple[float, float]:
     return time.perf_counter() - w, time.process_time() - c
 
 
-def measure(spec: str, k: int, repeats: int, old, tmp: Path) -> dict:
+#: the new renderer's stages: (module attribute, owner name) timed by wrapping them during extra repeats
+STAGES = {"orient": ("_Scene", "__init__"), "rasterise": ("_Scene", "pixels"), "colour": (None, "_paint"),
+          "labels": (None, "sheet_layout"), "text": (None, "draw_text"), "png": (None, "png_bytes")}
+
+
+def _stage_times(run, repeats: int) -> dict[str, float]:
+    """Best CPU seconds per stage of :mod:`cli.render` over ``repeats`` calls of ``run()`` (text caches cleared)."""
+    from cli import render
+
+    spent: dict[str, float] = {}
+    saved = []
+
+    def wrap(name, fn):
+        def timed(*a, **kw):
+            t = time.process_time()
+            try:
+                return fn(*a, **kw)
+            finally:
+                spent[name] = spent.get(name, 0.0) + time.process_time() - t
+        return timed
+
+    for name, (owner, attr) in STAGES.items():
+        obj = getattr(render, owner) if owner else render
+        saved.append((obj, attr, getattr(obj, attr)))
+        setattr(obj, attr, wrap(name, getattr(obj, attr)))
+    best: dict[str, float] = {}
+    try:
+        for _ in range(repeats):
+            spent.clear()
+            render._text_bitmap.cache_clear()
+            render._cluster_bitmap.cache_clear()
+            t = time.process_time()
+            run()
+            spent["total"] = time.process_time() - t
+            for name, sec in spent.items():
+                best[name] = min(best.get(name, np.inf), sec)
+    finally:
+        for obj, attr, fn in saved:
+            setattr(obj, attr, fn)
+    return {name: round(sec, 4) for name, sec in best.items()}
+
+
+_CHILD = r'''
+import json, sys, time
+sys.path.insert(0, sys.argv[1])
+import numpy as np
+import cli.main, mesh                      # what a stiefel process has loaded when it draws
+d = np.load(sys.argv[3])
+if sys.argv[2] == "new":
+    from cli import render
+else:
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("render_old", sys.argv[4])
+    render = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(render)
+t = time.perf_counter()
+render.contact_sheet(sys.argv[5], d["v"], d["f"], d["x"], titles=[str(s) for s in d["t"]])
+print(json.dumps({"first_s": time.perf_counter() - t, "matplotlib": "matplotlib" in sys.modules}))
+'''
+
+
+def _fresh(which: str, data: Path, old_path: Path, out: Path) -> dict:
+    """The first sheet of a fresh process that has already imported the CLI (imports of the renderer's own
+    dependencies included, as in a ``stiefel`` run)."""
+    p = subprocess.run([sys.executable, "-c", _CHILD, str(ROOT), which, str(data), str(old_path), str(out)],
+                       capture_output=True, text=True, check=True)
+    return json.loads(p.stdout.strip().splitlines()[-1])
+
+
+def measure(spec: str, k: int, repeats: int, old, tmp: Path, fresh: int = 3) -> dict:
     import mesh
     from cli import render
 
@@ -96,13 +170,34 @@ def measure(spec: str, k: int, repeats: int, old, tmp: Path) -> dict:
         wall, cpu = [t[0] for t in ts], [t[1] for t in ts]
         out[which] = {"wall_median_s": round(statistics.median(wall), 4), "wall_best_s": round(min(wall), 4),
                       "cpu_best_s": round(min(cpu), 4), "png_bytes": (tmp / f"{which}.png").stat().st_size}
+    out["new"]["stages_cpu_best_s"] = _stage_times(lambda: runs["new"](tmp / "stages.png"), repeats)
+    if fresh:
+        data = tmp / "sheet.npz"
+        np.savez(data, v=v, f=f, x=fields, t=np.array(titles))
+        firsts: dict[str, list[dict]] = {w: [] for w in runs}
+        for _ in range(fresh):
+            for which in sorted(runs, reverse=True):
+                firsts[which].append(_fresh(which, data, tmp / "render_old.py", tmp / f"fresh_{which}.png"))
+        for which, rs in firsts.items():
+            out[which]["fresh_first_median_s"] = round(statistics.median(r["first_s"] for r in rs), 4)
+            out[which]["imports_matplotlib"] = rs[0]["matplotlib"]
     return out
 
 
 def table(rows: list[dict]) -> str:
-    lines = ["| mesh | n | old: median / best wall (s) | old: best CPU (s) | new: median / best wall (s) "
-             "| new: best CPU (s) | speed-up (best CPU) | PNG old → new (KB) |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = ["First sheet of a fresh process that has imported the CLI (median, wall seconds):", "",
+             "| mesh | n | old | new | ratio |", "|---|---|---|---|---|"]
+    for r in rows:
+        o, n = r.get("old", {}), r["new"]
+        if "fresh_first_median_s" in n:
+            of, nf = o.get("fresh_first_median_s"), n["fresh_first_median_s"]
+            ratio = f"{of / nf:.1f}×" if of else "–"
+            old_s = f"{of:.3f}" if of is not None else "–"
+            lines.append(f"| {r['mesh']} | {r['n']} | {old_s} | {nf:.3f} | {ratio} |")
+    lines += ["", "Warm (same process, after one warm-up sheet):", "",
+              "| mesh | n | old: median / best wall (s) | old: best CPU (s) | new: median / best wall (s) "
+              "| new: best CPU (s) | speed-up (best CPU) | PNG old → new (KB) |",
+              "|---|---|---|---|---|---|---|---|"]
     for r in rows:
         o, n = r.get("old"), r["new"]
         old_cells = f"{o['wall_median_s']:.3f} / {o['wall_best_s']:.3f} | {o['cpu_best_s']:.3f}" if o else "– | –"
@@ -110,6 +205,12 @@ def table(rows: list[dict]) -> str:
         png = f"{o['png_bytes'] / 1024:.0f} → {n['png_bytes'] / 1024:.0f}" if o else f"{n['png_bytes'] / 1024:.0f}"
         lines.append(f"| {r['mesh']} | {r['n']} | {old_cells} | {n['wall_median_s']:.3f} / {n['wall_best_s']:.3f} "
                      f"| {n['cpu_best_s']:.3f} | {speed} | {png} |")
+    names = list(STAGES) + ["total"]
+    lines += ["", "New renderer, best CPU seconds per stage (each stage's best over the repeats):", "",
+              "| mesh | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
+    for r in rows:
+        st = r["new"]["stages_cpu_best_s"]
+        lines.append(f"| {r['mesh']} | " + " | ".join(f"{st.get(n, 0.0):.3f}" for n in names) + " |")
     return "\n".join(lines)
 
 
@@ -119,6 +220,8 @@ def main(argv: list[str] | None = None) -> int:
                    help="mesh files, or demo:S for the built-in surface at S subdivisions")
     p.add_argument("-k", type=int, default=10, help="fields (rows of the sheet)")
     p.add_argument("--repeats", type=int, default=5)
+    p.add_argument("--fresh", type=int, default=3, help="fresh processes per renderer for the first-sheet time "
+                   "(0: skip)")
     p.add_argument("--old-rev", default=OLD_REV, help="git revision of the former cli/render.py")
     p.add_argument("--out-json", default=None)
     p.add_argument("--out-md", default=None, help="write the table with the machine header here")
@@ -131,7 +234,7 @@ def main(argv: list[str] | None = None) -> int:
         old = _old_renderer(args.old_rev, Path(tmp))
         rows = []
         for spec in args.meshes:
-            rows.append(measure(spec, args.k, args.repeats, old, Path(tmp)))
+            rows.append(measure(spec, args.k, args.repeats, old, Path(tmp), args.fresh))
             print(json.dumps(rows[-1]), flush=True)
     text = table(rows)
     print(text)

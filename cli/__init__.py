@@ -6,7 +6,9 @@ Modules: ``cli.main`` (argument parsing, signals, exit codes), ``cli.commands``
 (the three subcommands), ``cli.run_dir`` (atomic output directories: staging,
 fsync, commit with ``summary.json`` last, lock), ``cli.demo_mesh`` (the built-in
 demo surface), ``cli.outputs`` (npz / PLY writers, μ parsing, provenance),
-``cli.render`` (PNG contact sheet of per-vertex fields, z-buffer rasteriser).
+``cli.render`` and ``cli.render_views`` (PNG contact sheets: principal-axes orientation, views, z-buffer
+rasteriser), ``cli.viewer`` (self-contained HTML viewer, ``stiefel view``), ``cli.options`` (the options
+and their API names), ``cli.compare`` (``compare-smoothings``).
 """
 
 __all__: list[str] = []

@@ -163,7 +163,7 @@ def _viewer(args: argparse.Namespace, run: RunDir, name: str, m: Any, fields: An
 
     info: dict = {}
     run.write("html", name, lambda fh: info.update(write_viewer(fh, m.vertices, m.faces, fields, names, title=title,
-                                                                 subtitles=subtitles)))
+                                                                 subtitles=subtitles, up=args.up)))
     return info
 
 
@@ -302,7 +302,7 @@ def cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir)
         titles = [f"mode {j} · λ̃ = {lam:.4g} · support {100 * s:.1f} %"
                   for j, (lam, s) in enumerate(zip(res.compressed_eigenvalues, support))]
         picture_error = _picture(run, "modes.png", lambda path: contact_sheet(
-            path, m.vertices, m.faces, res.modes, titles=titles))
+            path, m.vertices, m.faces, res.modes, titles=titles, up=args.up))
     summary = _summary_head(args, argv, mesh_info)
     summary.update(parameters=params, solver_options=passed, mu=mu, diagnostics=diag,
                    compressed_eigenvalues=res.compressed_eigenvalues, timings=timings,
@@ -378,7 +378,7 @@ def cmd_eigs(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir) 
 
         titles = [f"eigenfunction {j}  λ = {lam:.4g}" for j, lam in enumerate(evals)]
         picture_error = _picture(run, "eigs.png", lambda path: contact_sheet(path, m.vertices, m.faces, evecs,
-                                                                              titles=titles))
+                                                                              titles=titles, up=args.up))
     summary = _summary_head(args, argv, mesh_info)
     summary.update(parameters={"k": args.k, "laplacian": _laplacian_text(args.weights, args.area)},
                    eigenvalues=evals, diagnostics={"orthogonality": orth, "max_residual": resid},

@@ -98,7 +98,7 @@ def cmd_compare(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDi
     run.write_text("csv", "comparison.csv", csv_text)
     picture_error = None
     if solved and not args.no_png:
-        picture_error = _picture(run, "comparison.png", lambda path: _grid(path, m, lap, solved))
+        picture_error = _picture(run, "comparison.png", lambda path: _grid(path, m, lap, solved, args.up))
     summary = _summary_head(args, argv, mesh_info)
     summary.update(parameters={"k": args.k, "mu": _mu_record(spec, mu, pairs), "method": args.method,
                                "laplacian": _laplacian_text(args.weights, args.area),
@@ -119,7 +119,7 @@ def cmd_compare(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDi
     return _exit_code(interrupt)
 
 
-def _grid(path: Any, m: Any, lap: Any, solved: list[tuple[dict, Any]]) -> None:
+def _grid(path: Any, m: Any, lap: Any, solved: list[tuple[dict, Any]], up: str | None) -> None:
     """``comparison.png``: smoothing × mode, each row's modes matched to the first row's (``match_modes``)."""
     import numpy as np
 
@@ -134,7 +134,7 @@ def _grid(path: Any, m: Any, lap: Any, solved: list[tuple[dict, Any]]) -> None:
         titles.append(f"{display_name(row['smoothing'])} · objective {row['objective']:.5g} · "
                       f"sparsity {100 * row['sparsity_1e-3']:.0f} %")
     cols = [f"mode {j}" for j in range(ref.shape[1])]
-    grid_sheet(path, m.vertices, m.faces, fields, row_titles=titles, col_titles=cols)
+    grid_sheet(path, m.vertices, m.faces, fields, row_titles=titles, col_titles=cols, up=up)
 
 
 def _fmt(v: Any) -> str:

@@ -122,6 +122,14 @@ def _common(p: argparse.ArgumentParser, k_default: int) -> None:
                    help="JAX compilation cache (default: $STIEFEL_CACHE_DIR, else the user cache directory)")
     p.add_argument("--no-cache", action="store_true", help="compile without the persistent compilation cache")
     add_laplacian_options(p)
+    p.add_argument("--up", type=_checked(_up), default=None, metavar="AXIS",
+                   help="the pictures' vertical axis: x, y, z, -x, -y, -z, or auto (default: the mesh's principal axes)")
+
+
+def _up(text: str) -> str | None:
+    from .render_views import check_up
+
+    return check_up(text)
 
 
 def build_parser() -> argparse.ArgumentParser:

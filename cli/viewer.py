@@ -188,16 +188,32 @@ def _write_atomic(path: Path, data: bytes) -> None:
             os.close(dfd)
 
 
+def default_camera(vertices: Any, faces: Any, up: str | None = None) -> dict:
+    """A plotly ``scene.camera`` that opens on the contact sheet's front view (``cli.render_views.principal_frame``:
+    the mesh's principal axes, or ``up`` forced), seen from a little above and to the right, the whole mesh in view."""
+    import numpy as np
+
+    from .render_views import principal_frame
+
+    frame = principal_frame(np.asarray(vertices, dtype=np.float64), np.asarray(faces), up)
+    right, upv, towards = frame.axes
+    eye = towards + 0.35 * upv + 0.25 * right
+    eye = 2.4 * eye / np.linalg.norm(eye)  # plotly's scene box spans ±1 along the longest axis: the whole mesh in view
+    return {"eye": dict(zip("xyz", map(float, eye))), "up": dict(zip("xyz", map(float, upv))),
+            "center": {"x": 0.0, "y": 0.0, "z": 0.0}}
+
+
 def write_viewer(target: str | os.PathLike | IO, vertices: Any, faces: Any, fields: Any, names: Sequence[str], *,
                  title: str, subtitles: Sequence[str] | None = None, max_faces: int = DEFAULT_MAX_FACES,
-                 camera: Mapping | None = None) -> dict:
+                 camera: Mapping | None = None, up: str | None = None) -> dict:
     """Write the interactive viewer of ``fields`` on the mesh as one self-contained HTML file.
 
     target: a path (written atomically: temporary file, fsync, rename) or an open binary or text file.
     vertices ``(n, 3)``, faces ``(m, 3)``, fields ``(n, k)`` (or ``(n,)``), names: k labels of the menu;
     subtitles: k texts shown under the title with the field (e.g. ``"λ̃ = 0.12"``); meshes with more
     than ``max_faces`` faces are decimated for display; camera: a plotly ``scene.camera`` dict
-    (e.g. ``{"eye": {"x": 0, "y": 0, "z": 2}, "up": {"x": 0, "y": 1, "z": 0}}``).
+    (e.g. ``{"eye": {"x": 0, "y": 0, "z": 2}, "up": {"x": 0, "y": 1, "z": 0}}``), default
+    ``default_camera(vertices, faces, up)`` (``up``: as the contact sheet's ``--up``).
     Returns ``{"vertices", "faces"`` (shown), ``"decimated", "original_vertices", "original_faces", "bytes"}``.
     Raises ``ViewerError`` for inconsistent arrays or labels.
     """
@@ -222,6 +238,8 @@ def write_viewer(target: str | os.PathLike | IO, vertices: Any, faces: Any, fiel
     decimated = len(f2) < len(f)
     note = (f"decimated from {len(v)} to {len(v2)} vertices for display ({len(f)} → {len(f2)} faces)" if decimated
             else f"{len(v)} vertices, {len(f)} faces")
+    if camera is None:
+        camera = default_camera(v, f, up)
     page = _page(_figure(v2, f2, u2, limits.tolist(), names, subtitles, title, note, camera), title)
     data = page.encode("utf-8")
     if isinstance(target, (str, os.PathLike)):
@@ -287,6 +305,12 @@ def _max_faces(text: str) -> int:
         raise argparse.ArgumentTypeError(str(e)) from None
 
 
+def _up(text: str) -> str | None:
+    from .render_views import check_up
+
+    return check_up(text)
+
+
 def add_parser(sub: Any) -> argparse.ArgumentParser:
     """Add the ``view`` subcommand to an argparse subparsers object; return its parser."""
     p = sub.add_parser("view", help="interactive HTML viewer (one self-contained file) of a modes/eigs run",
@@ -298,6 +322,8 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--title", default=None, help="page title (default: the run directory's name and the kind of run)")
     p.add_argument("--max-faces", type=_max_faces, default=DEFAULT_MAX_FACES,
                    help=f"decimate larger meshes to this many faces for display (default {DEFAULT_MAX_FACES})")
+    p.add_argument("--up", type=_up, default=None, metavar="AXIS",
+                   help="the vertical axis the viewer opens with: x, y, z, -x, -y, -z, or auto (principal axes)")
     p.add_argument("--quiet", action="store_true", help="no 'wrote …' line")
     return p
 
@@ -312,7 +338,7 @@ def run_view(args: argparse.Namespace) -> int:
     title = args.title if args.title is not None else f"{Path(args.outdir).resolve().name}: {kind}"
     try:
         info = write_viewer(target, run["vertices"], run["faces"], run["fields"], run["names"], title=title,
-                            subtitles=run["subtitles"], max_faces=args.max_faces)
+                            subtitles=run["subtitles"], max_faces=args.max_faces, up=getattr(args, "up", None))
     except OSError as e:
         raise ViewerError(f"cannot write {target}: {e.strerror or e}: choose another --output") from None
     if not getattr(args, "quiet", False):

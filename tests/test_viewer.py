@@ -404,3 +404,21 @@ def test_browser_shows_the_field(tmp_path: Path) -> None:
     assert np.allclose(img[3, 3], 1.0, atol=0.02) and np.allclose(img[h - 4, 3], 1.0, atol=0.02)  # white background
     bar_red, bar_blue = np.nonzero(red & ~plot)[0], np.nonzero(blue & ~plot)[0]  # colour bar: +3 at the top
     assert len(bar_red) > 50 and len(bar_blue) > 50 and bar_red.mean() < bar_blue.mean()
+
+
+def test_default_camera_faces_a_flat_patch_and_honours_up() -> None:
+    """The viewer opens on the contact sheet's front view: a flat patch in the x-z plane is seen along ±y
+    (face-on), the camera's up is perpendicular to the eye; ``up="z"`` makes z the vertical axis."""
+    import numpy as np
+
+    import mesh
+    from cli.viewer import default_camera
+
+    m = mesh.example("patch")
+    cam = default_camera(m.vertices, m.faces)
+    eye = np.array([cam["eye"][c] for c in "xyz"])
+    up = np.array([cam["up"][c] for c in "xyz"])
+    assert abs(eye[1]) / np.linalg.norm(eye) > 0.85           # looking along the normal (y) of the patch
+    assert abs(up[1]) < 0.1 and abs(np.linalg.norm(up) - 1) < 1e-12
+    cam = default_camera(m.vertices, m.faces, up="z")
+    assert [cam["up"][c] for c in "xyz"] == [0.0, 0.0, 1.0]
