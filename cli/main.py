@@ -69,6 +69,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterator, NoReturn, Sequence
 
 # only light modules here: whatever the commands need is imported inside ``main``, where an interrupt is handled
+from .options import checked as _checked
 from .outputs import INT_MAX, PROG, bounded_int, stderr_line
 
 __all__ = ["main", "build_parser"]
@@ -90,16 +91,6 @@ class _Parser(argparse.ArgumentParser):
         raise SystemExit(2)
 
 
-def _checked(parse: Callable[[str], Any]) -> Callable[[str], Any]:
-    """An argparse ``type=`` whose ``ValueError`` message becomes the usage error."""
-
-    def check(text: str) -> Any:
-        try:
-            return parse(text)
-        except ValueError as e:
-            raise argparse.ArgumentTypeError(str(e)) from None
-
-    return check
 
 
 #: integer options are capped at a C int (``--max-iters 99999999999`` overflowed deep inside)

@@ -30,7 +30,7 @@ from typing import Any, Callable
 
 from .outputs import INT_MAX, PROG, bounded_int, parse_mu, stderr_line
 
-__all__ = ["add_laplacian_options", "add_cmm_options", "smoothing_name", "smoothing_list", "start_spec",
+__all__ = ["checked", "add_laplacian_options", "add_cmm_options", "smoothing_name", "smoothing_list", "start_spec",
            "load_start", "solver_from_args", "check_applicable", "DEFAULT_MU", "DEFAULT_WEIGHTING", "GTOL",
            "METHODS", "StartFile"]
 
@@ -49,7 +49,7 @@ _ONLY = {"eps": _MANIFOLD, "delta": _MANIFOLD, "continuation": _MANIFOLD, "conti
          "optimizer": ("block",), "preconditioner": ("block",)}
 
 
-def _checked(parse: Callable[[str], Any]) -> Callable[[str], Any]:
+def checked(parse: Callable[[str], Any]) -> Callable[[str], Any]:
     """An argparse ``type=`` whose ``ValueError`` message becomes the usage error."""
 
     def check(text: str) -> Any:
@@ -145,9 +145,9 @@ def load_start(spec: StartFile, n: int, k: int):
     return X
 
 
-_mu_type = _checked(parse_mu)
-_positive_type = _checked(_positive)
-_int_type = _checked(bounded_int(1, INT_MAX))
+_mu_type = checked(parse_mu)
+_positive_type = checked(_positive)
+_int_type = checked(bounded_int(1, INT_MAX))
 
 
 def add_laplacian_options(p: argparse.ArgumentParser) -> None:
@@ -166,7 +166,7 @@ def add_cmm_options(p: argparse.ArgumentParser, *, single_smoothing: bool) -> No
     mu.add_argument("--mu", type=_mu_type, default=None,
                     help=f"sparsity weight μ: absolute (5.2), relative to the vertex count (0.01n) or to λ_(k−1), the "
                          f"largest of the first k Laplacian eigenvalues (2λ or 2lambda); default {DEFAULT_MU}")
-    mu.add_argument("--target-sparsity", type=_checked(_fraction), default=None, metavar="S",
+    mu.add_argument("--target-sparsity", type=checked(_fraction), default=None, metavar="S",
                     help="choose μ so that a fraction S of the entries is below 1e-3 of their mode's maximum "
                          "(objectives.select_mu: several solves)")
     p.add_argument("--weighting", choices=("area", "uniform"), default=DEFAULT_WEIGHTING,
@@ -176,7 +176,7 @@ def add_cmm_options(p: argparse.ArgumentParser, *, single_smoothing: bool) -> No
     p.add_argument("--gtol", type=_positive_type, default=None,
                    help=f"gradient tolerance of the block/sequential solvers (default {GTOL})")
     if single_smoothing:
-        p.add_argument("--smoothing", type=_checked(smoothing_name), default="f6", metavar="NAME",
+        p.add_argument("--smoothing", type=checked(smoothing_name), default="f6", metavar="NAME",
                        help="ℓ1 smoothing by name or alias (f0 … f9; huber = f6, l1 = abs = f0, logcosh = f8, …: "
                             "objectives.smoothings); default f6 (huber)")
     p.add_argument("--eps", type=_positive_type, default=None,

@@ -219,6 +219,15 @@ def _save(path, canvas: np.ndarray, dpi: float, compress_level: int) -> None:
         Path(path).write_bytes(data)
 
 
+def _finish(path, canvas: np.ndarray, layout: Layout, lut: np.ndarray, dpi: float, compress_level: int) -> None:
+    """Draw the colour bars and the labels of ``layout`` into ``canvas`` and save it as a PNG."""
+    for bar in layout.bars:
+        _draw_bar(canvas, bar, lut)
+    for label in layout.labels:
+        draw_text(canvas, label, dpi)
+    _save(path, canvas, dpi, compress_level)
+
+
 def _titles(given: Sequence[str] | None, count: int, what: str, of: str, default: str) -> list[str]:
     if given is None:
         return [default.format(j) for j in range(count)]
@@ -268,11 +277,7 @@ def contact_sheet(path: Path, vertices: np.ndarray, faces: np.ndarray, fields: n
         view = scene.pixels(i, pw, ph, flat)
         values = view.interp @ fields.astype(np.float64, copy=False)      # (pixels, k)
         _paint(canvas, view, values, np.asarray(vmax), [boxes[j, i] for j in range(k)], lut)
-    for bar in layout.bars:
-        _draw_bar(canvas, bar, lut)
-    for label in layout.labels:
-        draw_text(canvas, label, dpi)
-    _save(path, canvas, dpi, compress_level)
+    _finish(path, canvas, layout, lut, dpi, compress_level)
     return layout
 
 
@@ -313,9 +318,5 @@ def grid_sheet(path: Path, vertices: np.ndarray, faces: np.ndarray, fields, *, r
     for j, f in enumerate(rows):
         values = view.interp @ f.astype(np.float64, copy=False)
         _paint(canvas, view, values, np.asarray(vmax[j]), [boxes[j, i] for i in range(c)], lut)
-    for bar in layout.bars:
-        _draw_bar(canvas, bar, lut)
-    for label in layout.labels:
-        draw_text(canvas, label, dpi)
-    _save(path, canvas, dpi, compress_level)
+    _finish(path, canvas, layout, lut, dpi, compress_level)
     return layout

@@ -62,6 +62,7 @@ def test_loop_member_equals_stiefel_minimize(lap):
     assert float(ref.value) == pytest.approx(float(looped.value[0]), rel=1e-12)
 
 
+@pytest.mark.slow  # 17 s; test_vmap_over_mu_equals_loop covers vmap in the default run
 def test_vmap_over_starts_and_smoothings(lap):
     """Random starts and ε/δ are batched too; a list of different smoothing functions runs one
     vmapped group per function and equals the per-smoothing batches."""

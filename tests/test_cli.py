@@ -162,7 +162,7 @@ def test_compare_smoothings_subset(tmp_path: Path) -> None:
     assert csv[0].startswith("smoothing,name,c1_at_zero,status,objective,dirichlet,l1")
     assert [line.split(",")[0] for line in csv[1:]] == ["f3", "f6"]
     md = (out / "comparison.md").read_text()
-    assert "| f6 | True |" in md
+    assert "| f6 | huber | True |" in md
     rows = json.loads((out / "summary.json").read_text())["results"]
     for r in rows:
         assert r["objective"] == pytest.approx(r["dirichlet"] + r["l1"])
