@@ -169,6 +169,20 @@ class GeneralizedStiefel(eqx.Module):
         Z = self.proj(X, jax.random.normal(key, X.shape, dtype=X.dtype))
         return Z / self.norm(X, Z)
 
+    def zero_vector(self, X: Point) -> Point:
+        """The zero tangent vector at ``X`` (pymanopt's and Manopt's ``zero_vector``/``zerovec``)."""
+        return jnp.zeros_like(X)
+
+    def random_tangent_vector(self, X: Point, key: PRNGKeyArray) -> Point:
+        """pymanopt's ``random_tangent_vector(point)`` with the key JAX needs: ``random_tangent(key, X)``
+        (use a key other than the one that made ``X``: the same Gaussian draw lies in span(X))."""
+        return self.random_tangent(key, X)
+
+    def transp(self, X: Point, Y: Point, Z: Point) -> Point:
+        """Manopt's ``transp(x1, x2, d)`` / pymanopt's ``transport(point_a, point_b, tangent_vector_a)``: the
+        tangent ``Z`` at ``X`` moved to ``T_Y`` by projection (``transport(Y, Z)``; ``X`` is not needed)."""
+        return self.transport(Y, Z)
+
     def dist_to_manifold(self, X: Point) -> Float[Array, ""]:
         """``max |XᵀMX − I|``."""
         return jnp.max(jnp.abs(X.T @ self.op.mv(X) - jnp.eye(X.shape[1], dtype=X.dtype)))
@@ -192,8 +206,9 @@ class GeneralizedStiefel(eqx.Module):
                 "use manifold.project_to_manifold(X) to move it onto the manifold"
             )
 
-    # pymanopt-style aliases, documented once.
+    # pymanopt-style aliases, documented once (README: "Names from pymanopt and Manopt").
     projection = proj
+    to_tangent_space = proj
     inner_product = inner
     euclidean_to_riemannian_gradient = egrad_to_rgrad
     euclidean_to_riemannian_hessian = ehess_to_rhess

@@ -215,3 +215,23 @@ def test_ordinary_stiefel_manifold_from_none():
         stiefel.GeneralizedStiefel(np.ones(n), k, n=n)
     with pytest.raises(ShapeError, match="shape"):
         stiefel.GeneralizedStiefel(None, k).check_point(np.zeros((n, k + 1)))
+
+
+def test_pymanopt_and_manopt_names() -> None:
+    """zero_vector, random_tangent_vector, transp and to_tangent_space mean what pymanopt/Manopt mean."""
+    S = GeneralizedStiefel(jnp.linspace(1.0, 3.0, 12), 3)
+    X = S.random_point(jax.random.PRNGKey(0))
+    Y = S.random_point(jax.random.PRNGKey(1))
+    assert float(jnp.max(jnp.abs(S.zero_vector(X)))) == 0.0 and S.zero_vector(X).shape == X.shape
+    Z = S.random_tangent_vector(X, jax.random.PRNGKey(7))
+    np.testing.assert_array_equal(np.asarray(Z), np.asarray(S.random_tangent(jax.random.PRNGKey(7), X)))
+    assert abs(float(S.norm(X, Z)) - 1.0) < 1e-12
+    assert float(jnp.max(jnp.abs(S.proj(X, Z) - Z))) < 1e-12                              # tangent at X
+    W = S.random_tangent_vector(X, jax.random.PRNGKey(5))
+    assert float(jnp.max(jnp.abs(W - Z))) > 1e-3
+    T = S.transp(X, Y, Z)
+    np.testing.assert_allclose(np.asarray(T), np.asarray(S.transport(Y, Z)), atol=0)
+    B = Y.T @ S.op.mv(T)
+    assert float(jnp.max(jnp.abs(B + B.T))) < 1e-12                                       # tangent at Y
+    G = jax.random.normal(jax.random.PRNGKey(2), X.shape)
+    np.testing.assert_array_equal(np.asarray(S.to_tangent_space(X, G)), np.asarray(S.proj(X, G)))
