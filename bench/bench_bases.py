@@ -1,9 +1,10 @@
 """Benchmark of ``objectives.bases`` (GLMH/LMH) and ``objectives.fmaps`` (functional maps + ICP).
 
-Run from the repository root (the shared meshes are read from ``../shared/meshes``)::
+Run from the repository root (mesh names resolve through ``bench.meshes``: ``example:NAME``, paths, or
+names in ``../shared/meshes`` when present; the default is the generated examples)::
 
     python -m bench.bench_bases --out bench/RESULTS_bases.md
-    python -m bench.bench_bases --quick        # bunny only, k = 50
+    python -m bench.bench_bases --quick        # the first mesh only, k = 50
 
 Part 1 — bases. For each mesh (cotangent W, lumped A, areas normalised to 1):
 ``Φ_20 = mesh.eigenbasis(lap, 20)``, the LMH region penalty ``v`` from the reconstruction
@@ -54,7 +55,6 @@ import mesh  # noqa: E402
 from bench.meshes import load_mesh  # noqa: E402
 from objectives import bases, fmaps  # noqa: E402
 
-MESHES = Path(__file__).resolve().parents[1].parent / "shared" / "meshes"
 BASES_MESHES = ["example:starfish", "example:torus", "example:bumpy", "example:patch"]  # --meshes: any
 KS = [50, 150]
 MU_R = 1e6

@@ -37,7 +37,6 @@ from bench.meshes import load_mesh  # noqa: E402
 from bench.environment import run_meta  # noqa: E402
 from objectives.batch import cmm_batch, cmm_problem, default_options  # noqa: E402
 
-MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
 CONFIGS = [  # (label, preconditioner, callback batching)
     ("superlu/sequential", "shifted", "sequential"),
     ("superlu/expand_dims", "shifted", "expand_dims"),

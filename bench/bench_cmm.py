@@ -52,7 +52,6 @@ from objectives.cmm import compressed_modes, first_eigenpairs  # noqa: E402
 from objectives.cmm_solvers import ADMMCMM, BlockCMM, SequentialCMM  # noqa: E402
 from stiefel.sparse_factor import default_backend  # noqa: E402
 
-MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
 REFERENCE = {  # issue 4: ADMM reference implementation (CHOLMOD), 2-core CPU
     "fandisk.off": (953.12, 29.0), "camelhead.off": (1299.2, 4.0), "bunny.off": (689.06, 0.7),
 }

@@ -50,7 +50,7 @@ from jax.experimental import sparse as jsparse  # noqa: E402
 import mesh  # noqa: E402
 from stiefel.operators import SparseOperator  # noqa: E402
 
-MESH_DIR = ROOT.parent / "shared" / "meshes"
+from bench.meshes import SHARED as MESH_DIR  # noqa: E402 — the test meshes beside the repository, when present
 SHARED = [
     "decimated-knight.off",
     "hand_868_holes2.obj",

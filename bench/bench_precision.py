@@ -41,7 +41,6 @@ from objectives.batch import cmm_batch, cmm_problem, default_options  # noqa: E4
 from objectives.cmm import compressed_modes  # noqa: E402
 from objectives.cmm_solvers import ADMMCMM  # noqa: E402
 
-MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
 DTYPES = {"float64": jnp.float64, "float32": jnp.float32}
 
 

@@ -58,7 +58,6 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 import scipy  # noqa: E402
 
-MESHES = ROOT.parent / "shared" / "meshes"
 HERE = Path(__file__).resolve().parent
 
 

@@ -68,7 +68,6 @@ from objectives.cmm import compressed_modes, first_eigenpairs  # noqa: E402
 from objectives.cmm_solvers import ADMMCMM, BlockCMM, FastCMM, SequentialCMM  # noqa: E402
 from objectives.energies import cmm_energy  # noqa: E402
 
-MESHES = ROOT.parent / "shared" / "meshes"
 HERE = Path(__file__).resolve().parent
 BLOCK = {"block-cg-cholesky": ("cg", "cholesky"), "block-cg-cayley": ("cg", "cayley"),
          "block-cg-polar": ("cg", "polar"), "block-lbfgs-cholesky": ("lbfgs", "cholesky"),

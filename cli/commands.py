@@ -237,7 +237,7 @@ def cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir)
     pairs = None
     if args.target_sparsity is None:
         spec, mu, pairs = _resolve_mu(args, lap, m.n_vertices)
-        if pairs is not None and isinstance(start, str):
+        if pairs is not None:  # computed for μ: the solve reuses them (start, preconditioner shift)
             extra["eigenpairs"] = pairs
     timings["load_s"] = time.perf_counter() - t
     U = None
@@ -284,7 +284,7 @@ def cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir)
             "support_area": support, "orthogonality": res.orthogonality, "iterations": res.iterations,
             "status": res.status}
     params = dict(res.params)
-    params["mu"] = _mu_record(spec, mu, extra.get("eigenpairs", pairs)) if target is None else {"target_sparsity": args.target_sparsity,
+    params["mu"] = _mu_record(spec, mu, pairs) if target is None else {"target_sparsity": args.target_sparsity,
                                                                  "value": mu, "trials": trials}
     params["laplacian"] = _laplacian_text(args.weights, args.area)
     params["start"] = str(args.start)
