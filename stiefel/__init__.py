@@ -8,6 +8,8 @@ Public API (docs/maths.md §1–3):
 * ``RiemannianCG``, ``RiemannianLBFGS``, ``RiemannianBB`` — ``optimistix`` minimisers:
   ``optx.minimise(fn, stiefel.RiemannianCG(S, rtol, atol), X0, args,
   adjoint=stiefel.RiemannianImplicitAdjoint())``.
+* ``RiemannianTrustRegion`` — second order: Riemannian trust regions with truncated CG (exact
+  Hessian by autodiff, or finite differences of the gradient), the same ``optx.minimise`` idiom.
 * ``minimize`` (block solver, the convenience entry point running the same minimisers) and
   ``minimize_sequential`` (thesis Algorithm 6); ``solve_block``, the block solver as a pure
   jittable/vmappable function.
@@ -45,6 +47,8 @@ from .driver import CallbackError, Progress
 from .hessian import hessian_operator, riemannian_hessian
 from .implicit import RiemannianImplicitAdjoint, riemannian_residual, tangent_solve
 from .minimisers import RiemannianBB, RiemannianCG, RiemannianLBFGS
+from .tcg import TCGStop, truncated_cg
+from .trust_region import RiemannianTrustRegion
 from .errors import (NonFiniteError, NotSPDError, OffManifoldError, ParameterError, RankDeficientError, ShapeError,
                      SolverError, StiefelError)
 from .linesearch import LineSearchResult, LineSearchStatus, along_curve, strong_wolfe

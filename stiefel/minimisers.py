@@ -59,10 +59,13 @@ def _budget(x):
 
 def to_optx_result(status):
     """``stiefel.Status`` code (traced or not) → ``optx.RESULTS`` item; −1 (running) → successful;
-    ``INTERRUPTED`` (only set by the host loop of ``stiefel.driver``) → max steps reached."""
+    ``INTERRUPTED`` (only set by the host loop of ``stiefel.driver``) → max steps reached; the trust-region
+    failures (collapsed radius, indefinite preconditioner) → ``nonlinear_divergence``."""
     R = optx.RESULTS
+    failed = ((status == Status.LINE_SEARCH_FAILED) | (status == Status.TRUST_REGION_COLLAPSED)
+              | (status == Status.INDEFINITE_PRECONDITIONER))
     return R.where(status == Status.NON_FINITE, R.nonfinite,
-                   R.where(status == Status.LINE_SEARCH_FAILED, R.nonlinear_divergence,
+                   R.where(failed, R.nonlinear_divergence,
                            R.where((status == Status.MAX_ITERS) | (status == Status.INTERRUPTED),
                                    R.nonlinear_max_steps_reached, R.successful)))
 

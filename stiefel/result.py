@@ -21,8 +21,12 @@ class Status:
     LINE_SEARCH_FAILED = 2  #: no acceptable step along a descent direction
     NON_FINITE = 3  #: the objective or its gradient became non-finite (last finite iterate kept)
     INTERRUPTED = 4  #: stopped from outside (``stop``, Ctrl-C, a raising ``progress`` callback); iterate kept
+    TRUST_REGION_COLLAPSED = 5  #: trust regions: the radius fell below its minimum with no acceptable step
+    INDEFINITE_PRECONDITIONER = 6  #: trust regions: ``⟨Pr, r⟩ ≤ 0`` for a residual ``r ≠ 0`` in the inner solve
 
-    names = ("converged", "max_iters", "line_search_failed", "non_finite", "interrupted")
+    names = ("converged", "max_iters", "line_search_failed", "non_finite", "interrupted", "trust_region_collapsed",
+             "indefinite_preconditioner")
+    FAILURES = (LINE_SEARCH_FAILED, NON_FINITE, TRUST_REGION_COLLAPSED, INDEFINITE_PRECONDITIONER)
 
     @classmethod
     def name(cls, code) -> str:
@@ -129,7 +133,7 @@ class Result(eqx.Module):
 
     def raise_for_status(self) -> "Result":
         """Raise ``SolverError`` unless the solver converged (or only ran out of iterations)."""
-        if int(self.status) in (Status.LINE_SEARCH_FAILED, Status.NON_FINITE):
+        if int(self.status) in Status.FAILURES:
             raise SolverError(
                 f"solver stopped with status {self.status_name!r} after {int(self.iterations)} iterations "
                 f"(objective {float(self.value):.6e}, gradient norm {float(self.grad_norm):.3e})"
@@ -176,7 +180,7 @@ class SequentialResult(eqx.Module):
         return bool(np.all(np.asarray(self.status) == Status.CONVERGED))
 
     def raise_for_status(self) -> "SequentialResult":
-        bad = [j for j, s in enumerate(np.asarray(self.status)) if s in (Status.LINE_SEARCH_FAILED, Status.NON_FINITE)]
+        bad = [j for j, s in enumerate(np.asarray(self.status)) if s in Status.FAILURES]
         if bad:
             j = bad[0]
             raise SolverError(
