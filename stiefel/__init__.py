@@ -49,7 +49,7 @@ from .implicit import RiemannianImplicitAdjoint, riemannian_residual, tangent_so
 from .minimisers import RiemannianBB, RiemannianCG, RiemannianLBFGS
 from .tcg import TCGStop, truncated_cg
 from .trust_region import RiemannianTrustRegion
-from .errors import (NonFiniteError, NotSPDError, OffManifoldError, ParameterError, RankDeficientError, ShapeError,
+from .errors import (NonFiniteError, NotSPDError, OffManifoldError, OutOfDomainError, ParameterError, RankDeficientError, ShapeError,
                      SolverError, StiefelError)
 from .linesearch import LineSearchResult, LineSearchStatus, along_curve, strong_wolfe
 from .manifold import GeneralizedStiefel, skew, sym

@@ -31,5 +31,10 @@ class RankDeficientError(OffManifoldError):
     """A start's columns are linearly dependent in the M inner product: no point of the manifold is near it."""
 
 
+class OutOfDomainError(StiefelError):
+    """An operation outside its domain, e.g. ``log(X, Y)`` for points with no logarithm shorter than the
+    injectivity radius (``stiefel.geodesics``)."""
+
+
 class SolverError(StiefelError):
     """A solver ended with a bad status and ``throw=True`` was asked for."""

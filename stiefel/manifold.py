@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
+from . import geodesics as _geodesics
 from .errors import OffManifoldError, ShapeError, StiefelError
 from .operators import IdentityOperator, LinearOperator, as_operator
 from .retractions import BLOCK_RETRACTIONS, RETRACTIONS, _inv_sqrt_spd
@@ -182,6 +183,20 @@ class GeneralizedStiefel(eqx.Module):
         """Manopt's ``transp(x1, x2, d)`` / pymanopt's ``transport(point_a, point_b, tangent_vector_a)``: the
         tangent ``Z`` at ``X`` moved to ``T_Y`` by projection (``transport(Y, Z)``; ``X`` is not needed)."""
         return self.transport(Y, Z)
+
+    # --- geodesics (stiefel.geodesics: closed forms with M-products only; the isometry X ↦ LᵀX implicit) ---
+    def exp(self, X: Point, Z: Point) -> Point:
+        """The exponential map ``Exp_X(Z)`` of the manifold's metric (closed form, O(nk²) + one product with M)."""
+        return _geodesics.exp(self, X, Z)
+
+    def log(self, X: Point, Y: Point) -> Point:
+        """``Log_X(Y)``: the tangent at ``X`` of the shortest geodesic to ``Y`` (Gauss–Newton shooting in
+        ``span(X, Y)``); ``OutOfDomainError`` unless it is shorter than the injectivity radius (NaN when traced)."""
+        return _geodesics.log(self, X, Y)
+
+    def dist(self, X: Point, Y: Point) -> Float[Array, ""]:
+        """Geodesic distance ``‖Log_X(Y)‖`` (same domain as ``log``)."""
+        return _geodesics.dist(self, X, Y)
 
     def dist_to_manifold(self, X: Point) -> Float[Array, ""]:
         """``max |XᵀMX − I|``."""
