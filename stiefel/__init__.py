@@ -10,6 +10,9 @@ Public API (docs/maths.md §1–3):
   adjoint=stiefel.RiemannianImplicitAdjoint())``.
 * ``RiemannianTrustRegion`` — second order: Riemannian trust regions with truncated CG (exact
   Hessian by autodiff, or finite differences of the gradient), the same ``optx.minimise`` idiom.
+* ``check_gradient``, ``check_hessian``, ``check_retraction`` — Manopt-style slope tests returning a
+  ``SlopeCheck`` (fitted slope, verdict, ``.plot()``); ``GeneralizedStiefel.exp``/``log``/``dist``
+  (``stiefel.geodesics``).
 * ``minimize`` (block solver, the convenience entry point running the same minimisers) and
   ``minimize_sequential`` (thesis Algorithm 6); ``solve_block``, the block solver as a pure
   jittable/vmappable function.
@@ -44,6 +47,7 @@ sparsax) when the global x64 flag is on, and as host callbacks otherwise; the th
 from .block_solver import METHODS, BlockOptions, minimize, solver_for
 from .block_solver import solve as solve_block
 from .driver import CallbackError, Progress
+from .checks import SlopeCheck, check_gradient, check_hessian, check_retraction
 from .hessian import hessian_operator, riemannian_hessian
 from .implicit import RiemannianImplicitAdjoint, riemannian_residual, tangent_solve
 from .minimisers import RiemannianBB, RiemannianCG, RiemannianLBFGS
