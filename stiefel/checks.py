@@ -1,5 +1,5 @@
 """Slope tests for gradients, Hessians and retractions (after Manopt's ``checkgradient``,
-``checkhessian`` and ``checkretraction``; docs/maths.md §1, §9).
+``checkhessian`` and ``checkretraction``; docs/maths.md §9, eq. (9.14)).
 
 Along a curve ``γ(t)`` from ``X`` with ``γ'(0) = d`` (unit tangent), each check measures the error of a
 Taylor model over several decades of ``t`` and fits the slope of ``log error`` against ``log t``:

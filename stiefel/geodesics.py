@@ -1,5 +1,5 @@
 """Geodesics of ``S_M = {XᵀMX = I}``: the exponential map, the logarithm and the distance, for both metrics
-(docs/maths.md §9, "Isometry").
+(docs/maths.md §9, eqs. (9.4), (9.11), (9.12)).
 
 With ``M = LLᵀ``, ``X ↦ LᵀX`` is an isometry of ``S_M`` onto the ordinary Stiefel manifold ``St(n, k)``, so
 ``Exp_X(ξ) = L⁻ᵀ Exp_{LᵀX}(Lᵀξ)``. Written out, every ``L`` cancels: the closed forms below need only

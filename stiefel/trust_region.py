@@ -1,5 +1,5 @@
 """Riemannian trust regions on ``S_M = {XᵀMX = I}`` as an ``optimistix`` minimiser (Absil, Baker,
-Gallivan, Found. Comput. Math. 2007; docs/maths.md §9).
+Gallivan, Found. Comput. Math. 2007; docs/maths.md §9, eq. (9.13)).
 
 ``optx.minimise(fn, RiemannianTrustRegion(S, rtol, atol), X0, args, max_steps=...)``. Each outer
 iteration builds the second-order model of ``F∘R_X`` on ``T_X`` in the M-weighted metric
