@@ -32,6 +32,7 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
     "first-run": ("bench.first_run", "whole stiefel processes: cold/warm cache, size buckets, progress (issue 17)"),
     "reliability": ("bench.reliability", "issue 19's fault catalogue: bad input, faults, loads -> docs/RELIABILITY.md"),
     "defaults": ("bench.defaults", "sparsity and support sizes of the CLI's default modes per mu rule (issue 21)"),
+    "second-order": ("bench.second_order", "trust regions vs CG / L-BFGS / pymanopt: Brockett and CMM final stages (issue 22)"),
     "render-cost": ("bench.render_cost", "PNG contact sheet: former vs current renderer, seconds per sheet (k = 10)"),
 }
 

@@ -3,6 +3,8 @@
 Public API (docs/maths.md §1–3):
 
 * ``GeneralizedStiefel(M, k, metric=..., retraction=...)`` — the manifold.
+* ``Grassmann(M, k)`` — the quotient ``S_M/O(k)`` for rotation-invariant objectives; ``sphere(n, M)``,
+  ``stiefel(n, k)`` — the named special cases (``stiefel.grassmann``).
 * ``SequentialConstraint`` — ``{x : ΦᵀMx = 0, xᵀMx = 1}`` for column-by-column solves.
 * ``strong_wolfe``, ``along_curve``, ``LineSearchStatus`` — the line search.
 * ``RiemannianCG``, ``RiemannianLBFGS``, ``RiemannianBB`` — ``optimistix`` minimisers:
@@ -48,6 +50,7 @@ from .block_solver import METHODS, BlockOptions, minimize, solver_for
 from .block_solver import solve as solve_block
 from .driver import CallbackError, Progress
 from .checks import SlopeCheck, check_gradient, check_hessian, check_retraction
+from .grassmann import Grassmann, sphere, stiefel
 from .hessian import hessian_operator, riemannian_hessian
 from .implicit import RiemannianImplicitAdjoint, riemannian_residual, tangent_solve
 from .minimisers import RiemannianBB, RiemannianCG, RiemannianLBFGS

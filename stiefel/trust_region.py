@@ -177,7 +177,10 @@ class RiemannianTrustRegion(optx.AbstractMinimiser):
         return jnp.sum(a * self.manifold.op.mv(b))
 
     def _rgrad(self, X, G):
+        """The gradient of the M-weighted metric (the manifold's own for ``Grassmann``)."""
         S = self.manifold
+        if S.metric == "euclidean":
+            return S.egrad_to_rgrad(X, G)
         return S.op.solve(G) - X @ sym(X.T @ G)
 
     def _gnorm(self, X, G, rg):
