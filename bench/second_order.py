@@ -167,6 +167,7 @@ def run_one(problem: dict, name: str, first, second, max_steps: int) -> dict:
     F = problem["make"](problem["Wop"])
     X0 = problem["X0"]
     steps = (max_steps if problem["kind"] == "brockett" or not name.startswith("TR") else 3000, 3000)
+    steps = (min(steps[0], max_steps) if name.startswith("TR") and problem["kind"] == "cmm" else steps[0], steps[1])
     solve = eqx.filter_jit(lambda F, X0: _solve(F, X0, first, second, steps))
     t = time.perf_counter()
     compiled = solve.lower(F, X0).compile()

@@ -31,7 +31,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .hessian import riemannian_hessian
+from .hessian import call, riemannian_hessian
 from .manifold import GeneralizedStiefel
 
 __all__ = ["SlopeCheck", "check_gradient", "check_hessian", "check_retraction", "fit_slope"]
@@ -130,7 +130,7 @@ def fit_slope(steps, errors, floor: float) -> tuple[float, tuple[int, int] | Non
 
 
 def _call(fn: Callable, args: Any, X):
-    return fn(X) if args is None else fn(X, args)
+    return call(fn, X, args)
 
 
 # Compiled pieces, keyed on (fn, manifold) structure: an objective that is a pytree (e.g. an
@@ -153,7 +153,7 @@ def _value_and_rgrad(fn, args, egrad, manifold, X):
 def _hess_apply(fn, args, hess, manifold, X, V):
     if hess is None:
         return riemannian_hessian(fn, manifold, X, V, args)
-    return hess(X, V) if args is None else hess(X, V, args)
+    return hess(X, V, args) if args is not None else hess(X, V)
 
 
 def _direction(manifold: GeneralizedStiefel, X, direction, key):
@@ -194,7 +194,8 @@ def check_gradient(fn: Callable, manifold: GeneralizedStiefel, X, *, args: Any =
     """Slope test of the Riemannian gradient of ``fn`` at ``X`` (module docstring).
 
     Args:
-      fn: ``fn(X)`` (or ``fn(X, args)``) → scalar. egrad: the Euclidean gradient ``∂F/∂X`` to check, with
+      fn: ``fn(X)`` or ``fn(X, args)`` (optimistix style; called with ``args = None`` when none is given) →
+        scalar. egrad: the Euclidean gradient ``∂F/∂X`` to check, with
         the same signature (default ``jax.grad(fn)``: then this checks the objective's own derivatives —
         custom JVPs, smoothings — and the manifold's gradient conversion and retraction).
       direction: a tangent (projected and normalised) or None: random from ``key``.

@@ -14,6 +14,7 @@ depend on the metric, and docs/maths.md §9 prescribes this form for second-orde
 
 from __future__ import annotations
 
+import inspect
 from typing import Any, Callable
 
 import jax
@@ -24,13 +25,29 @@ from .manifold import GeneralizedStiefel
 __all__ = ["riemannian_hessian", "hessian_operator"]
 
 
+def _needs_args(fn: Callable) -> bool:
+    """Whether ``fn`` requires a second positional argument (an optimistix-style ``fn(X, args)``)."""
+    try:
+        params = list(inspect.signature(fn).parameters.values())
+    except (TypeError, ValueError):  # no signature (a builtin): call it with X alone
+        return False
+    positional = [p for p in params if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)]
+    return len(positional) >= 2 and positional[1].default is inspect.Parameter.empty
+
+
+def call(fn: Callable, X, args: Any = None):
+    """``fn(X, args)`` when ``args`` is given or ``fn`` requires it (then with ``args = None``), else ``fn(X)``."""
+    return fn(X, args) if args is not None or _needs_args(fn) else fn(X)
+
+
 def _euclidean(fn: Callable, args: Any):
-    return (lambda X: fn(X)) if args is None else (lambda X: fn(X, args))
+    return lambda X: call(fn, X, args)
 
 
 def riemannian_hessian(fn: Callable, manifold: GeneralizedStiefel, X: Float[Array, "n k"],
                        xi: Float[Array, "n k"], args: Any = None) -> Float[Array, "n k"]:
-    """``Hess F(X)[ξ]`` for tangent ``ξ`` (module docstring); ``fn(X)`` or ``fn(X, args)`` → scalar.
+    """``Hess F(X)[ξ]`` for tangent ``ξ`` (module docstring); ``fn(X)`` or ``fn(X, args)`` → scalar (an
+    optimistix-style ``fn(X, args)`` is called with ``args = None`` when none is given).
 
     Costs one forward-over-reverse product (``jax.jvp`` of ``jax.grad``), one ``M⁻¹`` solve
     and one product with M.

@@ -127,3 +127,11 @@ def test_fit_slope_on_synthetic_curves():
     assert abs(slope - 2.0) <= 0.02 and not exact and window is not None
     assert stiefel.checks.fit_slope(t, np.full_like(t, 1e-16), 1e-13)[2]  # all at round-off
     assert np.isnan(stiefel.checks.fit_slope(t, np.full_like(t, np.nan), 1e-13)[0])
+
+
+def test_optimistix_style_objectives_without_args(cmm):
+    """``fn(X, args)`` as optimistix takes it, checked with no args: called with args = None."""
+    _, _, S, X = cmm
+    fn = lambda Y, args: jnp.sum(jnp.cos(Y))  # noqa: E731
+    assert stiefel.check_gradient(fn, S, X).passed and stiefel.check_hessian(fn, S, X).passed
+    assert stiefel.riemannian_hessian(fn, S, X, S.random_tangent(jax.random.PRNGKey(1), X)).shape == X.shape
