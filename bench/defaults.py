@@ -31,7 +31,7 @@ jax.config.update("jax_enable_x64", True)  # an application: float64
 import numpy as np  # noqa: E402
 
 import mesh  # noqa: E402
-from bench.environment import run_meta  # noqa: E402
+from bench.environment import header_lines, run_meta  # noqa: E402
 from bench.meshes import load_mesh  # noqa: E402
 from cli.outputs import parse_mu  # noqa: E402
 from objectives.cmm import compressed_modes, first_eigenpairs, unpack_laplacian  # noqa: E402
@@ -64,10 +64,7 @@ def measure(spec: str, rules: list[str], k: int, max_iters: int) -> list[dict]:
 
 
 def report(rows: list[dict], meta: dict) -> str:
-    lines = ["# Default μ: how localised are the CLI's modes?", "",
-             f"* date: {meta['date']}; machine: {meta['machine']} (shared with other jobs: seconds are noisy)",
-             f"* jax {meta['jax']}, scipy {meta['scipy']}, numpy {meta['numpy']}",
-             f"* command: `{meta['command']}`",
+    lines = ["# Default μ: how localised are the CLI's modes?", "", *header_lines(meta),
              f"* k = {meta['k']}, BlockCMM defaults (huber f6, δ = 1e-3, 4 continuation stages), area ℓ1 weights, "
              f"eigenbasis start, at most {meta['max_iters']} iterations",
              "* sparsity: fraction of entries below 1e-3 of their mode's maximum; support: fraction of the area where "

@@ -19,3 +19,10 @@ def run_meta(module: str, argv: list[str] | None, **fields) -> dict:
             "machine": f"{platform.machine()}, {os.cpu_count()} cores ({platform.processor() or 'cpu'})",
             "jax": jax.__version__, "scipy": scipy.__version__, "numpy": np.__version__, **fields,
             "command": f"python -m {module} " + " ".join(args)}
+
+
+def header_lines(meta: dict) -> list[str]:
+    """The results files' first bullet lines: date and machine, versions, the command."""
+    return [f"* date: {meta['date']}; machine: {meta['machine']} (shared with other jobs: seconds are noisy)",
+            f"* jax {meta['jax']}, scipy {meta['scipy']}, numpy {meta['numpy']}",
+            f"* command: `{meta['command']}`"]

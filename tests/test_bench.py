@@ -102,3 +102,18 @@ def test_cmm_bench_tables_for_random_starts_and_reference():
     value, t_ref = bench_cmm.REFERENCE["fandisk.off"]
     ref = next(line for line in lines if line.startswith(f"| fandisk.off | {value:.2f} |"))
     assert ref.split("|")[4:7] == [" shifted:cg ", " 0.40 ", f" {t_ref / 0.4:.0f}× "]
+
+
+@pytest.mark.slow
+def test_second_order_bench_tiny(tmp_path):
+    """``python -m bench second-order`` on a 100-vertex Brockett problem: every solver's row, W products counted,
+    the optimum matches eigsh, the convergence picture written beside the results."""
+    out = tmp_path / "RESULTS_second_order.md"
+    assert dispatcher.main(["second-order", "--brockett", "100", "--meshes", "--max-steps", "400",
+                            "--output", str(out)]) == 0
+    rows = json.loads((tmp_path / "results_second_order.json").read_text())["rows"]
+    assert [r["solver"] for r in rows] == ["TR", "TR + P", "CG + P", "L-BFGS + P", "L-BFGS"]
+    tr = rows[1]
+    assert tr["status"] == "converged" and tr["error_vs_eigsh"] <= 1e-12 and tr["w_products"] > tr["n_hvps"] > 0
+    assert (tmp_path / "second_order_convergence.png").read_bytes()[:4] == b"\x89PNG"
+    assert "| TR + P |" in out.read_text()
