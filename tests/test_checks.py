@@ -11,7 +11,7 @@ import objectives
 import stiefel
 from stiefel import GeneralizedStiefel
 
-from stiefel_cases import M_KINDS, grid_laplacian, metric_matrix
+from stiefel_cases import grid_laplacian, metric_matrix
 
 K = 3
 
@@ -94,7 +94,8 @@ def test_nondifferentiable_and_nonfinite_objectives_are_reported(cmm):
     assert linear.passed and linear.exact
 
 
-@pytest.mark.parametrize("kind", M_KINDS)
+@pytest.mark.parametrize("kind", ["diagonal", pytest.param("dense", marks=pytest.mark.slow),
+                                  pytest.param("sparse", marks=pytest.mark.slow)])
 def test_every_retraction(kind):
     """Cayley and Cholesky-QR are first order (slope 2), polar and radial (M-projections) second order
     (slope 3), periodic is the geodesic itself (exact)."""
