@@ -15,3 +15,18 @@ settings.load_profile("ci")
 import os  # noqa: E402
 
 os.environ["STIEFEL_CACHE_DIR"] = "off"
+
+# Every compiled XLA program keeps its machine code in memory maps of its own. The whole suite compiles
+# thousands of programs; kept for the life of the process they exceeded Linux's default limit of 65530
+# maps (vm.max_map_count) about 70 % of the way through, and LLVM then crashed (a segfault inside
+# compilation). Compiled programs are therefore dropped after each test module.
+import gc  # noqa: E402
+
+import pytest  # noqa: E402
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _release_compiled_programs():
+    yield
+    jax.clear_caches()
+    gc.collect()
