@@ -45,10 +45,10 @@ def _sym_eig(G):
     return jnp.sqrt(jnp.maximum(w, 0.0)), V
 
 
-def _ratio(fn, s):
-    """``fn(s)/s`` with its limit 1 at ``s = 0`` (``fn`` = sin or atan)."""
+def _atan_ratio(s):
+    """``atan(s)/s`` with its limit 1 at ``s = 0``."""
     safe = jnp.where(s > 1e-8, s, 1.0)
-    return jnp.where(s > 1e-8, fn(safe) / safe, 1.0 - s * s / (6.0 if fn is jnp.sin else 3.0))
+    return jnp.where(s > 1e-8, jnp.arctan(safe) / safe, 1.0 - s * s / 3.0)
 
 
 class Grassmann(GeneralizedStiefel):
@@ -96,7 +96,7 @@ class Grassmann(GeneralizedStiefel):
         smallest = jnp.linalg.svd(B, compute_uv=False)[-1]
         Z = jnp.linalg.solve(B.T, (Y - X @ B).T).T  # (Y − XB) B⁻¹
         s, V = _sym_eig(Z.T @ self.op.mv(Z))
-        return (Z @ V) @ (_ratio(jnp.arctan, s)[:, None] * V.T), smallest
+        return (Z @ V) @ (_atan_ratio(s)[:, None] * V.T), smallest
 
     def log(self, X: Point, Y: Point) -> Point:
         """``Log_X(Y)`` (module docstring); ``OutOfDomainError`` when a principal angle reaches π/2."""
