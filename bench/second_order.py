@@ -272,6 +272,13 @@ def run_pymanopt(problem: dict, python: str, gtol: float, max_time: float) -> di
     return row
 
 
+def _write(path: Path, text: str) -> None:
+    """``text`` to ``path`` atomically (a temporary file beside it, then a rename)."""
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
 def plot(rows: list[dict], path: Path) -> None:
     """Gradient norm per iteration, one panel per problem (log scale): the quadratic tail of TR."""
     import matplotlib  # noqa: PLC0415
@@ -374,7 +381,7 @@ def main(argv: list[str] | None = None) -> int:
             if "error" in r:
                 r["error"] = [line for line in r["error"].splitlines() if line.strip()][-1][-300:]
         plot(saved["rows"], args.output.parent / "second_order_convergence.png")
-        args.output.write_text(report(saved["rows"], saved["meta"]))
+        _write(args.output, report(saved["rows"], saved["meta"]))
         print(f"wrote {args.output}")
         return 0
     rows = []
@@ -389,8 +396,8 @@ def main(argv: list[str] | None = None) -> int:
                     max_time=args.max_time)
     out = args.output
     plot(rows, out.parent / "second_order_convergence.png")
-    (out.parent / "results_second_order.json").write_text(json.dumps({"meta": meta, "rows": rows}, indent=1))
-    out.write_text(report(rows, meta))
+    _write(out.parent / "results_second_order.json", json.dumps({"meta": meta, "rows": rows}, indent=1))
+    _write(out, report(rows, meta))
     print(f"wrote {out}")
     return 0
 
