@@ -41,6 +41,8 @@ from stiefel.validation import (check_count, check_finite, check_full_rank, chec
                                 check_positive, check_unit_interval)
 
 from .admm import l1_weights_np, orthonormalize
+from .l1_optimality import l1_stationarity, support_stats
+from .support_finish import SupportFinish, finish_support
 from .cmm_base import _no_callback
 from .cmm_solvers import SOLVERS, BlockCMM, CMMSolver, SolverOptionError, Start
 
@@ -65,6 +67,13 @@ class CMMResult:
       factorisations), compile_time, status, method, params (the arguments; for the ADMM
       methods also ``rho0``, the initial penalty used).
     history: objective trace ``{"time": (T,), "objective": (T,)}`` where available.
+    exact_zeros: fraction of entries exactly 0; support_sizes / support_areas: per mode, the number of
+      nonzero entries and their share of the total area (``objectives.l1_optimality.support_stats``).
+    l1_residual: the exact ℓ1 stationarity residual (docs/maths.md §9, eq. 9.10), relative — the convergence
+      measure of the non-smooth problem (meaningful for modes with exact zeros: ``finish`` or ADMM's split).
+    finish: with ``compressed_modes(finish=SupportFinish())`` the finish's record (status, objective before
+      and after, rounds, Newton and CG iterations, W products, entries added/removed, seconds), else None;
+      smooth_modes: then the solver's own (smoothed) modes, sorted and signed like ``modes``.
     """
 
     modes: np.ndarray
@@ -81,6 +90,12 @@ class CMMResult:
     method: str
     params: dict
     history: dict = dataclasses.field(default_factory=dict)
+    exact_zeros: float = 0.0
+    support_sizes: list = dataclasses.field(default_factory=list)
+    support_areas: list = dataclasses.field(default_factory=list)
+    l1_residual: float = float("nan")
+    finish: dict | None = None
+    smooth_modes: np.ndarray | None = None
 
     def __repr__(self) -> str:
         """One line: method, status, size, objective, sparsity, iterations and times (no arrays)."""
@@ -208,6 +223,7 @@ def compressed_modes(
     stop=None,
     verbose: bool = False,
     eigenpairs: tuple | None = None,
+    finish: SupportFinish | None = None,
 ) -> CMMResult:
     """Compressed manifold modes of a Laplacian ``(W, A)``.
 
@@ -233,6 +249,10 @@ def compressed_modes(
         ``supports_progress``; when set — or on Ctrl-C during such a solve — the result holds the modes
         reached, with status ``"interrupted"``.
 
+      finish: ``SupportFinish(...)`` (``objectives.support_finish``) to finish the solver's modes on the exact
+        ℓ1 problem restricted to their identified support: exact zeros, A-orthonormal to 1e-14, a true
+        objective no higher than the solver's (else the solver's modes, status ``objective_increased``);
+        the smooth modes stay in ``smooth_modes``. None (default): the solver's modes.
       eigenpairs: optional ``(evals, evecs)``, the first ``m ≥ max(k, 2)`` generalised eigenpairs of
         ``(W, A)`` (ascending, A-orthonormal: ``first_eigenpairs(W, a, m)``), used instead of solving
         for them — for several solves of one Laplacian (``stiefel compare-smoothings`` computes them once).
@@ -259,6 +279,8 @@ def compressed_modes(
         raise SolverOptionError(f"{type(solver).__name__} builds its start in span(U): use start='eigen' or 'random'")
     if kind == "array":
         _check_start(start, a)
+    if finish is not None and not isinstance(finish, SupportFinish):
+        raise SolverOptionError(f"finish must be None or a SupportFinish(...), got {finish!r}")
     if not solver.supports_callback:
         _no_callback(solver, callback)
     if verbose:
@@ -282,7 +304,19 @@ def compressed_modes(
     setup_time = time.perf_counter() - t_setup
     run = solver.solve(W, a, k, mu, Start(kind, X0, evals), weighting=weighting, seed=seed, dtype=dtype,
                        callback=callback, **live)
-    Psi, lam, dirichlet_part, l1_part, sparsity, orth = _diagnostics(W, a, mu, weighting, run.Psi)
+    finished, smooth_modes, wall_time = None, None, run.wall_time
+    Psi_out = run.Psi
+    if finish is not None:
+        fr = finish_support(W, a, l1_weights_np(a, weighting), mu, run.Psi, finish)
+        finished = dict(status=fr.status, objective_before=fr.objective_before, objective=fr.objective,
+                        rounds=fr.rounds, newton_iterations=fr.newton_iterations, cg_iterations=fr.cg_iterations,
+                        w_products=fr.w_products, added=fr.added, removed=fr.removed, wall_time=fr.wall_time,
+                        violations=fr.stationarity.violations)
+        smooth_modes = _diagnostics(W, a, mu, weighting, run.Psi)[0]
+        Psi_out, wall_time = fr.Psi, wall_time + fr.wall_time
+    Psi, lam, dirichlet_part, l1_part, sparsity, orth = _diagnostics(W, a, mu, weighting, Psi_out)
+    support = support_stats(Psi, a)
+    residual = l1_stationarity(W, a, l1_weights_np(a, weighting), mu, Psi).relative
     if progress is not None and not live:  # one report at the end
         progress(Progress(iteration=int(run.iterations), max_iters=int(getattr(solver, "max_iters", run.iterations)),
                           objective=dirichlet_part + l1_part, grad_norm=float("nan"), elapsed=run.wall_time,
@@ -291,8 +325,10 @@ def compressed_modes(
                   **run.info, setup_time=setup_time)
     return CMMResult(
         modes=Psi, compressed_eigenvalues=lam, objective=dirichlet_part + l1_part, dirichlet=dirichlet_part,
-        l1=l1_part, sparsity=sparsity, orthogonality=orth, iterations=int(run.iterations), wall_time=run.wall_time,
+        l1=l1_part, sparsity=sparsity, orthogonality=orth, iterations=int(run.iterations), wall_time=wall_time,
         compile_time=run.compile_time, status=run.status, method=solver.name, params=params, history=run.history,
+        exact_zeros=support["exact_zeros"], support_sizes=support["support_sizes"],
+        support_areas=support["support_areas"], l1_residual=residual, finish=finished, smooth_modes=smooth_modes,
     )
 
 

@@ -1,0 +1,176 @@
+"""Exact ℓ1 optimality (objectives.l1_optimality) and the exact-support finish (objectives.support_finish)."""
+
+import numpy as np
+import pytest
+import scipy.optimize as so
+import scipy.sparse as sp
+
+import mesh
+from mesh_fixtures import sphere
+from objectives import ADMMCMM, SolverOptionError, SupportFinish, compressed_modes, finish_support, l1_stationarity
+from objectives.admm import l1_weights_np
+from objectives.cmm import first_eigenpairs, unpack_laplacian
+from objectives.l1_optimality import MaskedGram, support_stats
+from objectives.support_finish import _Restricted, true_objective
+
+K = 4
+
+
+@pytest.fixture(scope="module")
+def problem():
+    """A 642-vertex sphere, k = 4, μ = 10λ_(k−1) (≈ 55 % exact zeros at the ℓ1 optimum), area weighting; the
+    block solver's (smoothed) modes."""
+    W, a = unpack_laplacian(mesh.laplacian(sphere(3)))
+    mu = 10.0 * first_eigenpairs(W, a, K)[0][-1]
+    smooth = compressed_modes((W, a), K, mu)
+    return W, a, l1_weights_np(a, "area"), mu, smooth
+
+
+@pytest.fixture(scope="module")
+def finished(problem):
+    W, a, w, mu, smooth = problem
+    return finish_support(W, a, w, mu, smooth.modes)
+
+
+def _random_problem(n=30, k=3, seed=0):
+    rng = np.random.default_rng(seed)
+    B = rng.standard_normal((n, n))
+    W = sp.csr_matrix(B @ B.T / n)
+    a = rng.uniform(0.5, 2.0, n) / n
+    X = rng.standard_normal((n, k))
+    X[rng.random((n, k)) < 0.4] = 0.0
+    return W, a, X
+
+
+def test_masked_gram_solves_its_map():
+    W, a, X = _random_problem()
+    D = (X != 0).astype(float)
+    gram = MaskedGram(X, a, D)
+    rng = np.random.default_rng(1)
+    R = rng.standard_normal((3, 3))
+    Lam = gram.solve(R)
+    assert np.allclose(Lam, Lam.T)
+    # the map by its definition: sym(Xᵀ(D∘(a ⊙ XΛ)))
+    direct = X.T @ (D * (a[:, None] * (X @ Lam)))
+    assert np.allclose(0.5 * (direct + direct.T), 0.5 * (R + R.T), atol=1e-12)
+    assert np.allclose(gram.apply(Lam), 0.5 * (R + R.T), atol=1e-12)
+
+
+def test_stationarity_matches_bounded_least_squares():
+    """Eq. (9.16) against scipy's bounded least squares over (Λ upper entries, Z on the zero entries)."""
+    W, a, X = _random_problem(n=24, k=2, seed=3)
+    mu = 0.7
+    w = np.full(len(a), 1.0 / len(a)) * 5
+    res = l1_stationarity(W, a, w, mu, X)
+    n, k = X.shape
+    iu = np.triu_indices(k)
+    zero = np.argwhere(X == 0.0)
+    s = 1.0 / np.sqrt(a)  # the A⁻¹ norm: divide each row's residual by √a_i
+    base = (2.0 * (W @ X) + mu * w[:, None] * np.sign(X)) * s[:, None]
+    cols = []
+    for p, q in zip(*iu):
+        E = np.zeros((k, k))
+        E[p, q] = E[q, p] = 1.0
+        cols.append((-(a[:, None] * (X @ E)) * s[:, None]).ravel())
+    for i, j in zero:
+        Z = np.zeros((n, k))
+        Z[i, j] = mu * w[i] * s[i]
+        cols.append(Z.ravel())
+    A = np.stack(cols, axis=1)
+    lo = np.r_[np.full(len(iu[0]), -np.inf), -np.ones(len(zero))]
+    hi = np.r_[np.full(len(iu[0]), np.inf), np.ones(len(zero))]
+    ref = so.lsq_linear(A, -base.ravel(), bounds=(lo, hi), tol=1e-14, lsmr_tol="auto", max_iter=5000)
+    assert res.residual == pytest.approx(np.linalg.norm(A @ ref.x + base.ravel()), rel=1e-7)
+
+
+def test_restricted_gradient_and_hessian_along_the_retraction(problem):
+    """d/dt f(R(tξ)) = ⟨grad, ξ⟩ and d²/dt² f(R(tξ)) = ⟨Hess ξ, ξ⟩ (the normal restoration is second order)."""
+    W, a, w, mu, smooth = problem
+    mask = (np.abs(smooth.modes) > 1e-2 * np.abs(smooth.modes).max(axis=0)).astype(float)
+    prob = _Restricted(W, a, w, mu, mask, np.sign(smooth.modes) * mask, 1.0)
+    Phi = prob.restore(mask * smooth.modes, mask)
+    assert np.abs(Phi.T @ (a[:, None] * Phi) - np.eye(K)).max() < 1e-13
+    WPhi = W @ Phi
+    gram, lam, grad = prob.point(Phi, WPhi)
+    rng = np.random.default_rng(0)
+    xi = prob.project(gram, Phi, mask * rng.standard_normal(Phi.shape))
+    xi /= np.sqrt(prob.inner(xi, xi))
+    lin = mu * w[:, None] * np.sign(smooth.modes) * mask
+
+    def f(t):  # the restricted objective (9.18), linear ℓ1 part with the fixed signs
+        Y = prob.restore(Phi + t * xi, mask)
+        return float(np.sum(Y * (W @ Y)) + np.sum(lin * Y))
+
+    h = 1e-4
+    d1 = (f(h) - f(-h)) / (2 * h)
+    d2 = (f(h) - 2 * f(0.0) + f(-h)) / h**2
+    assert d1 == pytest.approx(prob.inner(grad, xi), rel=1e-6, abs=1e-8)
+    assert d2 == pytest.approx(prob.inner(prob.hess(gram, Phi, lam, xi), xi), rel=1e-4)
+
+
+def test_finish_gives_exact_zeros_orthonormal_stationary(problem, finished):
+    W, a, w, mu, smooth = problem
+    Phi = finished.Psi
+    assert finished.status == "converged"
+    assert np.abs(Phi.T @ (a[:, None] * Phi) - np.eye(K)).max() < 1e-12
+    assert finished.objective <= finished.objective_before
+    assert finished.objective == pytest.approx(true_objective(W, w, mu, Phi), rel=1e-14)
+    assert finished.support["exact_zeros"] > 0.2
+    assert finished.stationarity.relative < 1e-8 and finished.stationarity.violations == 0
+    # the smoothed modes are not ℓ1-stationary: their tiny entries count with their sign
+    assert l1_stationarity(W, a, w, mu, smooth.modes).relative > 1e3 * finished.stationarity.relative
+    # KKT (9.15) by hand: with the reported multiplier, the support rows hold exactly, the zeros within the box
+    v = 2.0 * (W @ Phi) - a[:, None] * (Phi @ finished.stationarity.multiplier)
+    t = mu * w[:, None]
+    on = Phi != 0
+    assert np.max(np.abs(v + t * np.sign(Phi))[on]) < 1e-6 * np.abs(v).max()
+    assert np.all(np.abs(v[~on]) <= t.repeat(K, axis=1)[~on] * (1 + 1e-6))
+
+
+def test_compressed_modes_with_finish_keeps_the_smooth_answer(problem):
+    W, a, w, mu, smooth = problem
+    res = compressed_modes((W, a), K, mu, finish=SupportFinish())
+    assert res.finish["status"] == "converged"
+    assert res.objective <= smooth.objective
+    assert np.array_equal(res.smooth_modes, smooth.modes)
+    assert res.exact_zeros == pytest.approx(np.mean(res.modes == 0.0))
+    assert res.support_sizes == [int(c) for c in (res.modes != 0).sum(axis=0)]
+    assert len(res.support_areas) == K and all(0 < x <= 1 for x in res.support_areas)
+    assert res.l1_residual < 1e-8 and res.orthogonality < 1e-12
+    assert smooth.finish is None and smooth.smooth_modes is None and smooth.exact_zeros == 0.0
+
+
+def test_finish_of_admm_not_worse_and_sparser(problem):
+    W, a, w, mu, _ = problem
+    admm = compressed_modes((W, a), K, mu, solver=ADMMCMM(max_iters=3000))
+    fr = finish_support(W, a, w, mu, admm.modes)
+    assert fr.objective <= admm.objective
+    assert fr.support["exact_zeros"] >= admm.sparsity["1e-6"] - 0.01
+    assert np.abs(fr.Psi.T @ (a[:, None] * fr.Psi) - np.eye(K)).max() < 1e-12
+
+
+def test_budget_exhausted_is_reported(problem):
+    W, a, w, mu, smooth = problem
+    fr = finish_support(W, a, w, mu, smooth.modes, SupportFinish(max_newton=1))
+    assert fr.status in ("max_iters", "objective_increased")
+    assert fr.objective <= fr.objective_before
+    assert np.abs(fr.Psi.T @ (a[:, None] * fr.Psi) - np.eye(K)).max() < 1e-12
+
+
+def test_support_stats():
+    X = np.array([[1.0, 0.0], [0.0, 0.0], [2.0, -1.0]])
+    st = support_stats(X, np.array([1.0, 1.0, 2.0]))
+    assert st == {"exact_zeros": 0.5, "support_sizes": [2, 1], "support_areas": [0.75, 0.5]}
+
+
+@pytest.mark.parametrize("opts", [dict(threshold=1.0), dict(threshold=-0.1), dict(gtol=float("nan")),
+                                  dict(max_rounds=0), dict(max_newton=1.5), dict(max_cg=0), dict(kkt_margin=-1.0)])
+def test_bad_options(opts):
+    with pytest.raises(SolverOptionError):
+        SupportFinish(**opts)
+
+
+def test_finish_must_be_an_options_object(problem):
+    W, a, _, mu, _ = problem
+    with pytest.raises(SolverOptionError, match="SupportFinish"):
+        compressed_modes((W, a), K, mu, finish="support")
