@@ -6,6 +6,7 @@ import os
 import platform
 import sys
 import time
+from pathlib import Path
 
 import jax
 import numpy as np
@@ -26,3 +27,12 @@ def header_lines(meta: dict) -> list[str]:
     return [f"* date: {meta['date']}; machine: {meta['machine']} (shared with other jobs: seconds are noisy)",
             f"* jax {meta['jax']}, scipy {meta['scipy']}, numpy {meta['numpy']}",
             f"* command: `{meta['command']}`"]
+
+
+def write_atomic(path: Path, text: str) -> None:
+    """``text`` to ``path`` atomically (a temporary file beside it, then a rename): an interrupted run
+    never leaves a half-written results file."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)

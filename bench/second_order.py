@@ -50,7 +50,7 @@ import scipy.sparse as sp  # noqa: E402
 import scipy.sparse.linalg as spla  # noqa: E402
 
 import stiefel  # noqa: E402
-from bench.environment import header_lines, run_meta  # noqa: E402
+from bench.environment import header_lines, run_meta, write_atomic  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 COUNT = [0]
@@ -272,13 +272,6 @@ def run_pymanopt(problem: dict, python: str, gtol: float, max_time: float) -> di
     return row
 
 
-def _write(path: Path, text: str) -> None:
-    """``text`` to ``path`` atomically (a temporary file beside it, then a rename)."""
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-
-
 def plot(rows: list[dict], path: Path) -> None:
     """Gradient norm per iteration, one panel per problem (log scale): the quadratic tail of TR."""
     import matplotlib  # noqa: PLC0415
@@ -381,7 +374,7 @@ def main(argv: list[str] | None = None) -> int:
             if "error" in r:
                 r["error"] = [line for line in r["error"].splitlines() if line.strip()][-1][-300:]
         plot(saved["rows"], args.output.parent / "second_order_convergence.png")
-        _write(args.output, report(saved["rows"], saved["meta"]))
+        write_atomic(args.output, report(saved["rows"], saved["meta"]))
         print(f"wrote {args.output}")
         return 0
     rows = []
@@ -396,8 +389,8 @@ def main(argv: list[str] | None = None) -> int:
                     max_time=args.max_time)
     out = args.output
     plot(rows, out.parent / "second_order_convergence.png")
-    _write(out.parent / "results_second_order.json", json.dumps({"meta": meta, "rows": rows}, indent=1))
-    _write(out, report(rows, meta))
+    write_atomic(out.parent / "results_second_order.json", json.dumps({"meta": meta, "rows": rows}, indent=1))
+    write_atomic(out, report(rows, meta))
     print(f"wrote {out}")
     return 0
 

@@ -253,6 +253,10 @@ def cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir)
     target = f"target sparsity {args.target_sparsity:g}" if args.target_sparsity is not None else None
     say(f"solving: k = {args.k}, mu = {target or f'{mu:.6g} ({spec.text})'}, method = {args.method}, "
         f"smoothing = {smoothing}, weighting = {args.weighting}, start = {args.start}")
+    if getattr(args, "finish", False):
+        from objectives import SupportFinish
+
+        extra["finish"] = SupportFinish()
     partial = _partial_writer(args.method, compressed_modes, out, say)
     if partial is not None:
         extra["callback"] = partial
@@ -277,12 +281,17 @@ def cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir)
     interrupt = _interrupted_solve(args, res.status)
     say(f"solved: status = {res.status}, iterations = {res.iterations}, objective = {res.objective:.6g}, "
         f"orthogonality = {res.orthogonality:.2e}")
+    if res.finish is not None:
+        say(f"finish: status = {res.finish['status']}, objective {res.finish['objective_before']:.6g} -> "
+            f"{res.objective:.6g}, exact zeros {100 * res.exact_zeros:.1f} %, l1 residual {res.l1_residual:.1e}, "
+            f"{res.finish['wall_time']:.2f} s")
 
     t = time.perf_counter()
     support = _supports(res.modes, np.asarray(lap.A.diagonal()))
     diag = {"objective": res.objective, "dirichlet": res.dirichlet, "l1": res.l1, "sparsity": res.sparsity,
             "support_area": support, "orthogonality": res.orthogonality, "iterations": res.iterations,
-            "status": res.status}
+            "status": res.status, "exact_zeros": res.exact_zeros, "support_sizes": res.support_sizes,
+            "support_areas": res.support_areas, "l1_residual": res.l1_residual, "finish": res.finish}
     params = dict(res.params)
     params["mu"] = _mu_record(spec, mu, pairs) if target is None else {"target_sparsity": args.target_sparsity,
                                                                  "value": mu, "trials": trials}
@@ -290,7 +299,8 @@ def cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir)
     params["start"] = str(args.start)
     run.write("npz", "modes.npz", lambda fh: np.savez_compressed(
         fh, modes=res.modes, compressed_eigenvalues=res.compressed_eigenvalues, vertices=m.vertices,
-        faces=m.faces, mu=mu, diagnostics=json.dumps(to_jsonable(diag)), parameters=json.dumps(to_jsonable(params))))
+        faces=m.faces, mu=mu, diagnostics=json.dumps(to_jsonable(diag)), parameters=json.dumps(to_jsonable(params)),
+        **({} if res.smooth_modes is None else {"smooth_modes": res.smooth_modes})))
     run.write("ply", "modes.ply", lambda fh: write_ply(fh, m.vertices, m.faces, res.modes, ascii=args.ascii_ply))
     viewer = _viewer(args, run, "modes.html", m, res.modes, [f"mode {j}" for j in range(args.k)],
                      [f"λ̃ = {lam:.6g} · support {100 * s:.1f} %" for lam, s in zip(res.compressed_eigenvalues, support)],

@@ -126,6 +126,21 @@ def test_modes_demo_mesh(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     _check_png(out / "modes.png")
 
 
+def test_modes_finish_records_exact_sparsity(tmp_path: Path) -> None:
+    """--finish: exact zeros in modes.npz, the smooth modes beside them, the finish and ℓ1 residual in summary.json."""
+    out = tmp_path / "finish"
+    assert main(["modes", "-k", "3", "--mu", "2λ", *FAST, "--finish", "--no-png", "--quiet", "--out", str(out)]) == 0
+    z = np.load(out / "modes.npz")
+    modes, smooth = z["modes"], z["smooth_modes"]
+    assert smooth.shape == modes.shape and np.mean(modes == 0.0) > 0.1 and np.mean(smooth == 0.0) < 0.01
+    V, F = demo_mesh()
+    assert _a_orthonormality(modes, (V, F)) < 1e-12
+    diag = json.loads((out / "summary.json").read_text())["diagnostics"]
+    assert diag["finish"]["status"] == "converged" and diag["objective"] <= diag["finish"]["objective_before"]
+    assert diag["exact_zeros"] == pytest.approx(np.mean(modes == 0.0))
+    assert diag["support_sizes"] == [int(c) for c in (modes != 0).sum(axis=0)] and diag["l1_residual"] < 1e-8
+
+
 @needs_hand
 def test_modes_hand_json_quiet(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     out = tmp_path / "hand"
