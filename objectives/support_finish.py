@@ -319,7 +319,7 @@ def finish_support(W, a: Float[np.ndarray, " n"], w: Float[np.ndarray, " n"], mu
     W: ``(n, n)`` sparse PSD; a: ``(n,)`` diag A; w: ``(n,)`` ℓ1 weights (``l1_weights_np``); μ ≥ 0;
     Psi: ``(n, k)``; sigma: the preconditioner's shift (default: the largest diagonal of the start's
     multiplier, ≈ 2 × the largest compressed eigenvalue). Returns a ``FinishResult``: M-orthonormal to
-    1e-14 with exact zeros, or — when the finish would raise the true objective — the input with status
+    1e-12 (1e-14 typically) with exact zeros, or — when the finish would raise the true objective — the input with status
     ``objective_increased``. Never raises on a failed solve: the status says what happened.
     """
     t0 = time.perf_counter()
