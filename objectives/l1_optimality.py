@@ -55,13 +55,20 @@ class MaskedGram:
         images = 0.5 * (half + np.transpose(half, (0, 2, 1)))
         self.matrix = images[:, self.iu[0], self.iu[1]].T  # (m, m): columns are the images of the basis
         self.T = T
+        # a pair of columns with disjoint masked supports has an identically zero row and column (its
+        # constraint holds for every Λ): invert the rest, that multiplier entry is 0
+        diag = np.abs(np.diag(self.matrix))
+        live = diag > 1e-14 * max(float(diag.max()), 1e-300)
+        self._inverse = np.zeros_like(self.matrix)
+        block = self.matrix[np.ix_(live, live)]
         try:
-            self._inverse = np.linalg.inv(self.matrix)
+            inverse = np.linalg.inv(block)
+            self.singular = not np.all(np.isfinite(inverse))
         except np.linalg.LinAlgError:
-            self._inverse = None
-        self.singular = self._inverse is None or not np.all(np.isfinite(self._inverse))
+            self.singular = True
         if self.singular:  # a column without support, or a rank-deficient one: least squares
-            self._inverse = np.linalg.pinv(self.matrix)
+            inverse = np.linalg.pinv(block)
+        self._inverse[np.ix_(live, live)] = inverse
 
     def _to_matrix(self, vec: np.ndarray) -> np.ndarray:
         L = np.zeros((self.k, self.k))

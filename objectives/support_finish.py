@@ -39,11 +39,17 @@ from .l1_optimality import L1Stationarity, MaskedGram, l1_stationarity, support_
 #: zero entries violating (9.9) join the support once their excess (A⁻¹-norm) is ≥ this × the gradient on the
 #: support (bench/RESULTS_finish.md: 1 → 10 halved the entries added and dropped and the time on example:bumpy)
 ADD_RATIO = 10.0
+#: support entries below this fraction of their column's peak count as at zero for leaving the support
+TINY = 1e-6
+#: "converged" needs (9.10) within this factor of gtol when the steps stop, else "stalled"
+STALL_FACTOR = 1e3
+#: a Newton run stops as "stalled" when the objective fell by ≤ 1e-10 (relative) over this many steps
+STALL_WINDOW = 20
 #: a column's preconditioner factor is rebuilt when its support shrank by more than this fraction
 REFACTOR = 0.2
 __all__ = ["SupportFinish", "FinishResult", "finish_support"]
 
-FINISH_STATUSES = ("converged", "max_rounds", "max_iters", "line_search_failed", "retraction_failed",
+FINISH_STATUSES = ("converged", "stalled", "max_rounds", "max_iters", "line_search_failed", "retraction_failed",
                    "objective_increased", "non_finite")
 
 
@@ -143,8 +149,9 @@ class _Restricted:
         ``A⁻¹``-norm of their excess and v."""
         v = 2.0 * WPhi - self.a[:, None] * (Phi @ lam)
         t = self.mu * self.w[:, None]
-        excess = np.where(self.mask == 0, np.maximum(np.abs(v) - t, 0.0), 0.0)
-        violate = (self.mask == 0) & (np.abs(v) > (1.0 + margin) * t)
+        free = self.mask == 0
+        excess = np.where(free, np.maximum(np.abs(v) - t, 0.0), 0.0)
+        violate = free & (np.abs(v) > (1.0 + margin) * t)
         return violate, float(np.sqrt(np.sum(excess**2 / self.a[:, None]))), v
 
     def matvec(self, X):
@@ -179,10 +186,11 @@ class _Restricted:
     def inner(self, x, y):
         return float(np.sum(self.a[:, None] * x * y))
 
-    def restore(self, Y, mask, max_iters: int = 30, tol: float = 1e-14):
-        """Newton along the normal space: ``Z = Y + mask∘(YΛ)`` with ``ZᵀAZ = I``; None if it fails."""
+    def restore(self, Y, mask, max_iters: int = 60, tol: float = 1e-14, gram: MaskedGram | None = None):
+        """Newton along the normal space: ``Z = Y + mask∘(YΛ)`` with ``ZᵀAZ = I``; None if it fails. ``gram``: a
+        Gram map near Y (e.g. the base point's) used for chord steps while they contract fast."""
         k = Y.shape[1]
-        Z, gram, last = Y, None, np.inf
+        Z, last = Y, np.inf
         for _ in range(max_iters):
             C = Z.T @ (self.a[:, None] * Z) - np.eye(k)
             err = float(np.max(np.abs(C)))
@@ -190,7 +198,7 @@ class _Restricted:
                 return None
             if err <= tol:
                 return Z
-            if gram is None or err > 0.1 * last:  # chord steps while they contract fast, else a fresh map
+            if gram is None or err > 0.5 * last:  # chord steps while they contract, else a fresh map
                 gram = MaskedGram(Z, self.a, mask)
             last = err
             delta = gram.solve(-0.5 * C)
@@ -198,13 +206,13 @@ class _Restricted:
         C = Z.T @ (self.a[:, None] * Z) - np.eye(k)
         return Z if float(np.max(np.abs(C))) <= 1e-12 else None
 
-    def orthant_retract(self, Y):
+    def orthant_retract(self, Y, gram: MaskedGram | None = None):
         """Entries that left their sign's orthant set to 0 and dropped, then ``restore``; (Z, mask) or None."""
         mask = self.mask.copy()
         for _ in range(30):  # a restore can push a few small entries across zero: drop them too
             crossed = (mask > 0) & (Y * self.signs < 0)
             mask[crossed] = 0.0
-            Z = self.restore(mask * Y, mask)
+            Z = self.restore(mask * Y, mask, gram=gram)
             if Z is None:
                 return None
             if not np.any((mask > 0) & (Z * self.signs < 0)):
@@ -248,17 +256,27 @@ def _newton(prob: _Restricted, Phi, gtol_abs: float, scale: float, budget: int, 
     WPhi = prob.matvec(Phi)
     f = prob.value(Phi, WPhi)
     steps = cg = dropped = added = 0
+    recent = [f]  # objective values of the last STALL_WINDOW steps
     while True:
         gram, lam, grad = prob.point(Phi, WPhi)
         gnorm = np.sqrt(prob.inner(grad, grad))
         if not np.isfinite(gnorm):
             return Phi, WPhi, steps, cg, dropped, added, "non_finite"
-        # support entries at exactly 0 that descent would push out of their orthant leave the support
-        stuck = (prob.mask > 0) & (Phi == 0.0) & (grad * prob.signs > 0)
+        # support entries at (or within TINY of) zero that descent would push out of their orthant leave the
+        # support: a step would cut them at zero, and the cut breaks the step's first-order decrease
+        peak = np.max(np.abs(Phi), axis=0, keepdims=True)
+        stuck = (prob.mask > 0) & (np.abs(Phi) <= TINY * peak) & (grad * prob.signs > 0)
         if stuck.any():
             dropped += int(stuck.sum())
             mask = prob.mask.copy()
             mask[stuck] = 0.0
+            if np.any(Phi[stuck] != 0.0):
+                restored = prob.restore(mask * Phi, mask)
+                if restored is None:
+                    return Phi, WPhi, steps, cg, dropped, added, "retraction_failed"
+                Phi = restored
+                WPhi = prob.matvec(Phi)
+                f = prob.value(Phi, WPhi)
             prob.set_support(mask, prob.signs)
             gram, lam, grad = prob.point(Phi, WPhi)
             gnorm = np.sqrt(prob.inner(grad, grad))
@@ -282,13 +300,25 @@ def _newton(prob: _Restricted, Phi, gtol_abs: float, scale: float, budget: int, 
         for attempt in range(2):  # the Newton direction, then (if it fails) the preconditioned gradient
             if attempt == 1:
                 eta = -prob.precondition(gram, Phi, grad)
-            eta = np.where((Phi == 0.0) & (eta * prob.signs < 0), 0.0, eta)  # zeros move into their orthant only
+            # support entries at zero whose (tangent) move leaves their orthant leave the support, until none do
+            # (then the step moves every zero inward to first order and the Armijo slope is honest)
+            for _ in range(10):
+                eta = prob.project(gram, Phi, prob.mask * eta)
+                bad = (prob.mask > 0) & (Phi == 0.0) & (eta * prob.signs < 0)
+                if not bad.any():
+                    break
+                dropped += int(bad.sum())
+                mask = prob.mask.copy()
+                mask[bad] = 0.0
+                prob.set_support(mask, prob.signs)
+                gram, lam, grad = prob.point(Phi, WPhi)
+                gnorm = np.sqrt(prob.inner(grad, grad))
             slope = prob.inner(grad, eta)
             if not slope < 0.0:  # not a descent direction: steepest descent
                 eta, slope = -grad, -gnorm**2
             t = 1.0
             for _ in range(50):
-                trial = prob.orthant_retract(Phi + t * eta)
+                trial = prob.orthant_retract(Phi + t * eta, gram)
                 if trial is not None:
                     W_trial = prob.matvec(trial[0])
                     f_trial = prob.value(trial[0], W_trial)
@@ -305,6 +335,11 @@ def _newton(prob: _Restricted, Phi, gtol_abs: float, scale: float, budget: int, 
             floor = -slope <= 1e-12 * max(abs(f), 1.0) or gnorm <= 1e3 * gtol_abs
             return Phi, WPhi, steps, cg, dropped, added, ("converged" if floor else "line_search_failed")
         Phi, mask = found
+        recent = (recent + [f_trial])[-STALL_WINDOW:]
+        if len(recent) == STALL_WINDOW and recent[0] - recent[-1] <= 1e-10 * max(abs(f_trial), 1.0):
+            if np.any(mask != prob.mask):
+                prob.set_support(mask, prob.signs)
+            return Phi, W_trial, steps, cg, dropped, added, "stalled"
         if np.any(mask != prob.mask):
             dropped += int(np.sum(prob.mask - mask))
             prob.set_support(mask, prob.signs)
@@ -362,6 +397,8 @@ def finish_support(W, a: Float[np.ndarray, " n"], w: Float[np.ndarray, " n"], mu
     if after > before + 1e-12 * abs(before):
         Phi, after, status = Psi, before, "objective_increased"
     stationarity = l1_stationarity(W, a, w, mu, Phi)
+    if status in ("converged", "stalled"):  # the steps stopped: (9.10) tells round-off from a stall
+        status = "converged" if stationarity.relative <= STALL_FACTOR * options.gtol else "stalled"
     return FinishResult(Psi=Phi, status=status, objective=after, objective_before=before,
                         stationarity=stationarity, rounds=rounds, newton_iterations=newton, cg_iterations=cg,
                         w_products=products, added=added, removed=removed, wall_time=time.perf_counter() - t0,
