@@ -117,3 +117,18 @@ def test_second_order_bench_tiny(tmp_path):
     assert tr["status"] == "converged" and tr["error_vs_eigsh"] <= 1e-12 and tr["w_products"] > tr["n_hvps"] > 0
     assert (tmp_path / "second_order_convergence.png").read_bytes()[:4] == b"\x89PNG"
     assert "| TR + P |" in out.read_text()
+
+
+@pytest.mark.slow
+def test_peers_bench_tiny(tmp_path):
+    """``python -m bench peers`` on a 100-vertex Brockett problem without pymanopt: a row per retraction with
+    the time per iteration, the objective history, the default retraction named in the report."""
+    out, js = tmp_path / "RESULTS_peers.md", tmp_path / "results_peers.json"
+    assert dispatcher.main(["peers", "--sizes", "100", "--meshes", "--iterations", "20", "--pymanopt", "",
+                            "--out-md", str(out), "--out-json", str(js)]) == 0
+    rows = json.loads(js.read_text())["rows"]
+    assert [r["retraction"] for r in rows] == ["cayley", "cholesky", "polar"]
+    for r in rows:
+        assert r["iterations"] == 20 and r["ms_per_iteration"] > 0 and len(r["history_value"]) == 21
+        assert r["history_value"][-1] < r["history_value"][0]
+    assert "ours CG (cholesky)" in out.read_text()
