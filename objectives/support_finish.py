@@ -334,7 +334,14 @@ def _newton(prob: _Restricted, Phi, gtol_abs: float, scale: float, budget: int, 
                 break
         steps += 1
         if found is None:  # no decrease along the direction: the round-off floor (or a failed restore)
+            zeros = (prob.mask > 0) & (Phi == 0.0)
             floor = -slope <= 1e-12 * max(abs(f), 1.0) or gnorm <= 1e3 * gtol_abs
+            if not floor and zeros.any():  # freed zeros blocked every step: drop them and go on
+                dropped += int(zeros.sum())
+                mask = prob.mask.copy()
+                mask[zeros] = 0.0
+                prob.set_support(mask, prob.signs)
+                continue
             return Phi, WPhi, steps, cg, dropped, added, ("converged" if floor else "line_search_failed")
         Phi, mask = found
         recent = (recent + [f_trial])[-STALL_WINDOW:]
