@@ -2,11 +2,13 @@
 
     python -m bench finish                                   # the generated examples (no files needed)
     python -m bench finish --meshes example:bumpy hand_868.obj fandisk.off camelhead.off
+    python -m bench finish --meshes --manpg 128 512 2048     # ManPG's 1-D problem (no mesh files)
 
 For each mesh (k = 10, μ = 2λ_(k−1), area ℓ1 weights, eigenbasis start): the default ``BlockCMM``, the same
 modes finished by ``finish_support``, ``ADMMCMM`` (defaults) and its modes finished — true objective,
 exact-zero fraction, entries below 1e-6 of their column's peak, the exact ℓ1 stationarity residual
-(docs/maths.md §9, eq. 9.10, relative), orthogonality, iterations and seconds (compile apart). Writes
+(docs/maths.md §9, eq. 9.10, relative), orthogonality, iterations and seconds (compile apart). ``--manpg N …``
+adds ManPG's 1-D compressed-modes problem (``manpg_problem``) at r = 4, 10 and μ = 0.1, 0.3 from a random start. Writes
 ``bench/RESULTS_finish.md`` and ``bench/results_finish.json`` (atomically).
 """
 
@@ -25,6 +27,7 @@ import jax  # noqa: E402
 jax.config.update("jax_enable_x64", True)  # an application: float64
 
 import numpy as np  # noqa: E402
+import scipy.sparse as sp  # noqa: E402
 
 import mesh  # noqa: E402
 from bench.environment import header_lines, run_meta, write_atomic  # noqa: E402
@@ -51,14 +54,29 @@ def _row(label, n, method, Psi, W, a, w, mu, **extra) -> dict:
 
 
 def measure(spec: str, k: int, finish: SupportFinish) -> list[dict]:
+    """A mesh: k modes at μ = 2λ_(k−1), area weights, eigenbasis start."""
     m, label = load_mesh(spec)
     W, a = unpack_laplacian(mesh.laplacian(m))
-    w = l1_weights_np(a, "area")
     pairs = first_eigenpairs(W, a, max(k, 2))
-    mu = 2.0 * float(pairs[0][-1])
+    return measure_problem(label, W, a, k, 2.0 * float(pairs[0][-1]), finish, dict(eigenpairs=pairs))
+
+
+def manpg_problem(n: int) -> tuple:
+    """ManPG's compressed-modes problem (Chen, Ma, So, Zhang, SIAM J. Optim. 2020, §6.1): ``Ĥ = −½Δ``, the periodic
+    second-difference Laplacian on ``[0, 50]`` with n points, and ``XᵀX = I`` (A = I, so the area-weighted ℓ1 is
+    ``μ‖X‖₁``). Returns ``(W (n, n) csr, a = ones (n,))``."""
+    h = 50.0 / n
+    e = np.ones(n)
+    D = sp.diags([-e[:-1], 2 * e, -e[:-1]], [-1, 0, 1], format="lil")
+    D[0, n - 1] = D[n - 1, 0] = -1.0
+    return sp.csr_matrix(D / (2.0 * h * h)), np.ones(n)
+
+
+def measure_problem(label: str, W, a, k: int, mu: float, finish: SupportFinish, start: dict) -> list[dict]:
+    w = l1_weights_np(a, "area")
     rows = []
     for name, solver in (("block", BlockCMM()), ("admm", ADMMCMM())):
-        r = compressed_modes((W, a), k, mu, solver=solver, eigenpairs=pairs)
+        r = compressed_modes((W, a), k, mu, solver=solver, **start)
         rows.append(_row(label, len(a), name, r.modes, W, a, w, mu, status=r.status, iterations=r.iterations,
                          seconds=r.wall_time, compile_seconds=r.compile_time))
         f = finish_support(W, a, w, mu, r.modes, finish)
@@ -99,11 +117,20 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--meshes", nargs="+", default=EXAMPLES,
                    help="example:NAME, paths or mesh names in ../shared/meshes (default: the generated examples)")
     p.add_argument("-k", type=int, default=10)
+    p.add_argument("--manpg", nargs="*", type=int, default=[], metavar="N",
+                   help="also ManPG's 1-D compressed-modes problem at these n (r = 4, 10; μ = 0.1, 0.3; random start "
+                        "seed 0 for every method), e.g. --manpg 128 512 2048")
     p.add_argument("--out-md", type=Path, default=ROOT / "bench" / "RESULTS_finish.md")
     p.add_argument("--out-json", type=Path, default=ROOT / "bench" / "results_finish.json")
     args = p.parse_args(argv)
     meta = run_meta("bench finish", argv, k=args.k)
     rows = [row for spec in args.meshes for row in measure(spec, args.k, SupportFinish())]
+    for n in args.manpg:
+        W, a = manpg_problem(n)
+        for r in (4, 10):
+            for mu in (0.1, 0.3):
+                rows += measure_problem(f"ManPG n = {n}, r = {r}, μ = {mu}", W, a, r, mu, SupportFinish(),
+                                        dict(start="random", seed=0))
     write_atomic(args.out_json, json.dumps({"meta": meta, "rows": rows}, indent=1) + "\n")
     write_atomic(args.out_md, report(rows, meta))
     print(f"wrote {args.out_md} and {args.out_json}", file=sys.stderr)

@@ -132,3 +132,15 @@ def test_peers_bench_tiny(tmp_path):
         assert r["iterations"] == 20 and r["ms_per_iteration"] > 0 and len(r["history_value"]) == 21
         assert r["history_value"][-1] < r["history_value"][0]
     assert "ours CG (cholesky)" in out.read_text()
+
+
+def test_manpg_problem_is_the_periodic_schrodinger_operator():
+    """bench.finish.manpg_problem: Ĥ = −½Δ with periodic differences on [0, 50] — eigenvalues (1 − cos 2πj/n)/h²."""
+    from bench.finish import manpg_problem
+
+    n = 64
+    W, a = manpg_problem(n)
+    h = 50.0 / n
+    expected = np.sort((1.0 - np.cos(2.0 * np.pi * np.arange(n) / n)) / h**2)
+    assert np.allclose(np.linalg.eigvalsh(W.toarray()), expected, atol=1e-10)
+    assert np.array_equal(a, np.ones(n)) and (W != W.T).nnz == 0
