@@ -269,19 +269,22 @@ def _newton(prob: _Restricted, Phi, gtol_abs: float, scale: float, budget: int, 
         peak = np.max(np.abs(Phi), axis=0, keepdims=True)
         stuck = (prob.mask > 0) & (np.abs(Phi) <= TINY * peak) & (grad * prob.signs > 0)
         if stuck.any():
-            dropped += int(stuck.sum())
             mask = prob.mask.copy()
             mask[stuck] = 0.0
+            new = (Phi, WPhi, f)
             if np.any(Phi[stuck] != 0.0):
                 restored = prob.restore(mask * Phi, mask)
-                if restored is None:
-                    return Phi, WPhi, steps, cg, dropped, added, "retraction_failed"
-                Phi = restored
-                WPhi = prob.matvec(Phi)
-                f = prob.value(Phi, WPhi)
-            prob.set_support(mask, prob.signs)
-            gram, lam, grad = prob.point(Phi, WPhi)
-            gnorm = np.sqrt(prob.inner(grad, grad))
+                if restored is not None:
+                    W_restored = prob.matvec(restored)
+                    new = (restored, W_restored, prob.value(restored, W_restored))
+            # zeroing entries below TINY of the peak moves the objective by next to nothing: a restoration that
+            # moved it more jumped elsewhere (an ill-conditioned Gram map) and is refused, the entries stay
+            if new[2] <= f + 1e-9 * max(abs(f), 1.0):
+                dropped += int(stuck.sum())
+                Phi, WPhi, f = new
+                prob.set_support(mask, prob.signs)
+                gram, lam, grad = prob.point(Phi, WPhi)
+                gnorm = np.sqrt(prob.inner(grad, grad))
         # zero entries violating (9.9) join the support when their violation is comparable to the gradient
         violate, viol_norm, v = prob.violations(Phi, WPhi, lam, margin)
         if violate.any() and viol_norm >= ADD_RATIO * gnorm:
