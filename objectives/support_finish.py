@@ -369,6 +369,11 @@ def finish_support(W, a: Float[np.ndarray, " n"], w: Float[np.ndarray, " n"], mu
     1e-12 (1e-14 typically) with exact zeros, or — when the finish would raise the true objective — the input with status
     ``objective_increased``. Never raises on a failed solve: the status says what happened.
     """
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # non-finite values end in a status
+        return _finish(W, a, w, mu, Psi, options, sigma)
+
+
+def _finish(W, a, w, mu: float, Psi, options: SupportFinish, sigma: float | None) -> FinishResult:
     t0 = time.perf_counter()
     W = sp.csr_matrix(W, dtype=np.float64)
     a = np.asarray(a, dtype=np.float64)
