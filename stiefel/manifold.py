@@ -43,8 +43,8 @@ class GeneralizedStiefel(eqx.Module):
       n: the number of rows, for ``M = None`` only.
       metric: ``"euclidean"`` (``tr(Z1ᵀMZ2)``) or ``"canonical"``
         (``tr(Z1ᵀM(I − ½XXᵀM)Z2)``).
-      retraction: ``"cayley"`` (low-rank, default), ``"cholesky"``, ``"polar"``;
-        for ``k = 1`` also ``"radial"`` and ``"periodic"``.
+      retraction: ``"polar"`` (default: the fastest per iteration, bench/RESULTS_peers.md), ``"cholesky"``,
+        ``"cayley"`` (low-rank, the thesis's); for ``k = 1`` also ``"radial"`` and ``"periodic"``.
       check: validate that M is SPD (raises ``NotSPDError``).
       dtype: dtype of the stored operator (default float64 when x64 is enabled).
 
@@ -56,7 +56,7 @@ class GeneralizedStiefel(eqx.Module):
     metric: str = eqx.field(static=True)
     retraction: str = eqx.field(static=True)
 
-    def __init__(self, M, k: int, *, metric: str = "euclidean", retraction: str = "cayley",
+    def __init__(self, M, k: int, *, metric: str = "euclidean", retraction: str = "polar",
                  check: bool = True, dtype=None, n: int | None = None):
         if M is None:
             if n is not None and not (is_integer(n) and int(n) >= 1):
