@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import platform
 import sys
+import json
 import time
 from pathlib import Path
 
@@ -36,3 +37,11 @@ def write_atomic(path: Path, text: str) -> None:
     tmp = path.with_name(f".{path.name}.tmp")
     tmp.write_text(text)
     os.replace(tmp, path)
+
+
+def write_results(json_path: Path, md_path: Path, meta: dict, rows: list[dict], report: str) -> None:
+    """A benchmark's results: ``{"meta", "rows"}`` as JSON and the markdown ``report``, each written atomically
+    (JSON first, so a report never describes rows that are not on disk)."""
+    write_atomic(json_path, json.dumps({"meta": meta, "rows": rows}, indent=1) + "\n")
+    write_atomic(md_path, report)
+    print(f"wrote {md_path} and {json_path}", file=sys.stderr)

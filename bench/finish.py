@@ -30,7 +30,7 @@ import numpy as np  # noqa: E402
 import scipy.sparse as sp  # noqa: E402
 
 import mesh  # noqa: E402
-from bench.environment import header_lines, run_meta, write_atomic  # noqa: E402
+from bench.environment import header_lines, run_meta, write_results  # noqa: E402
 from bench.meshes import load_mesh  # noqa: E402
 from objectives.admm import l1_weights_np  # noqa: E402
 from objectives.cmm import compressed_modes, first_eigenpairs, unpack_laplacian  # noqa: E402
@@ -114,7 +114,7 @@ def report(rows: list[dict], meta: dict) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m bench finish", description=__doc__.splitlines()[0])
-    p.add_argument("--meshes", nargs="+", default=EXAMPLES,
+    p.add_argument("--meshes", nargs="*", default=EXAMPLES,
                    help="example:NAME, paths or mesh names in ../shared/meshes (default: the generated examples)")
     p.add_argument("-k", type=int, default=10)
     p.add_argument("--manpg", nargs="*", type=int, default=[], metavar="N",
@@ -131,9 +131,7 @@ def main(argv: list[str] | None = None) -> int:
             for mu in (0.1, 0.3):
                 rows += measure_problem(f"ManPG n = {n}, r = {r}, μ = {mu}", W, a, r, mu, SupportFinish(),
                                         dict(start="random", seed=0))
-    write_atomic(args.out_json, json.dumps({"meta": meta, "rows": rows}, indent=1) + "\n")
-    write_atomic(args.out_md, report(rows, meta))
-    print(f"wrote {args.out_md} and {args.out_json}", file=sys.stderr)
+    write_results(args.out_json, args.out_md, meta, rows, report(rows, meta))
     return 0
 
 

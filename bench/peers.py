@@ -42,7 +42,7 @@ import optimistix as optx  # noqa: E402
 import scipy.sparse as sp  # noqa: E402
 
 import stiefel  # noqa: E402
-from bench.environment import header_lines, run_meta, write_atomic  # noqa: E402
+from bench.environment import header_lines, run_meta, write_results  # noqa: E402
 from bench.second_order import brockett_problem, cmm_problem  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -218,9 +218,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.pymanopt:
             rows.append(run_peer(problem, args.pymanopt, args.iterations))
     compare(rows)
-    write_atomic(args.out_json, json.dumps({"meta": meta, "rows": rows}, indent=1) + "\n")
-    write_atomic(args.out_md, report(rows, meta))
-    print(f"wrote {args.out_md} and {args.out_json}", file=sys.stderr)
+    write_results(args.out_json, args.out_md, meta, rows, report(rows, meta))
     return 0
 
 

@@ -144,3 +144,18 @@ def test_manpg_problem_is_the_periodic_schrodinger_operator():
     expected = np.sort((1.0 - np.cos(2.0 * np.pi * np.arange(n) / n)) / h**2)
     assert np.allclose(np.linalg.eigvalsh(W.toarray()), expected, atol=1e-10)
     assert np.array_equal(a, np.ones(n)) and (W != W.T).nnz == 0
+
+
+@pytest.mark.slow
+def test_finish_bench_manpg_tiny(tmp_path):
+    """``python -m bench finish --meshes --manpg 32``: four rows per ManPG case; the finished modes have exact
+    zeros, are A-orthonormal and are not above their method's own objective."""
+    out, js = tmp_path / "RESULTS_finish.md", tmp_path / "results_finish.json"
+    assert dispatcher.main(["finish", "--meshes", "--manpg", "32", "--out-md", str(out), "--out-json", str(js)]) == 0
+    rows = json.loads(js.read_text())["rows"]
+    assert len(rows) == 16 and {r["method"] for r in rows} == {"block", "block + finish", "admm", "admm + finish"}
+    for own, fin in zip(rows[::2], rows[1::2]):
+        assert fin["method"] == own["method"] + " + finish" and fin["objective"] <= own["objective"]
+        assert fin["orthogonality"] < 1e-12
+    assert all(r["exact_zeros"] > 0.5 for r in rows if r["method"] == "block + finish")
+    assert "| block + finish |" in out.read_text()
