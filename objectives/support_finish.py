@@ -39,7 +39,8 @@ from stiefel.validation import check_count, check_number
 from .l1_optimality import L1Stationarity, MaskedGram, l1_stationarity, support_stats
 
 #: zero entries violating (9.9) join the support once their excess (A⁻¹-norm) is ≥ this × the gradient on the
-#: support (bench/RESULTS_finish.md: 1 → 10 halved the entries added and dropped and the time on example:bumpy)
+#: support (measured on example:bumpy from the block modes, k = 10, μ = 2λ: 1 → 10 cut the entries added and dropped
+#: from 2.2·10⁵ to 8.9·10⁴ and the finish from 17 s to 7 s, same minimum)
 ADD_RATIO = 10.0
 #: support entries below this fraction of their column's peak count as at zero for leaving the support
 TINY = 1e-6
