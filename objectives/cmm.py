@@ -305,18 +305,19 @@ def compressed_modes(
     run = solver.solve(W, a, k, mu, Start(kind, X0, evals), weighting=weighting, seed=seed, dtype=dtype,
                        callback=callback, **live)
     finished, smooth_modes, wall_time = None, None, run.wall_time
-    Psi_out = run.Psi
+    Psi_out, w, residual = run.Psi, l1_weights_np(a, weighting), None
     if finish is not None:
-        fr = finish_support(W, a, l1_weights_np(a, weighting), mu, run.Psi, finish)
+        fr = finish_support(W, a, w, mu, run.Psi, finish)
         finished = dict(status=fr.status, objective_before=fr.objective_before, objective=fr.objective,
                         rounds=fr.rounds, newton_iterations=fr.newton_iterations, cg_iterations=fr.cg_iterations,
                         w_products=fr.w_products, added=fr.added, removed=fr.removed, wall_time=fr.wall_time,
                         violations=fr.stationarity.violations)
         smooth_modes = _diagnostics(W, a, mu, weighting, run.Psi)[0]
-        Psi_out, wall_time = fr.Psi, wall_time + fr.wall_time
+        Psi_out, wall_time, residual = fr.Psi, wall_time + fr.wall_time, fr.stationarity.relative
     Psi, lam, dirichlet_part, l1_part, sparsity, orth = _diagnostics(W, a, mu, weighting, Psi_out)
     support = support_stats(Psi, a)
-    residual = l1_stationarity(W, a, l1_weights_np(a, weighting), mu, Psi).relative
+    if residual is None:  # (invariant under the column order and signs _diagnostics applies)
+        residual = l1_stationarity(W, a, w, mu, Psi).relative
     if progress is not None and not live:  # one report at the end
         progress(Progress(iteration=int(run.iterations), max_iters=int(getattr(solver, "max_iters", run.iterations)),
                           objective=dirichlet_part + l1_part, grad_norm=float("nan"), elapsed=run.wall_time,

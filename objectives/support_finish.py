@@ -36,6 +36,7 @@ from jaxtyping import Float
 from stiefel.sparse_factor import SymmetricFactor
 from stiefel.validation import check_count, check_number
 
+from .admm import _true_objective as true_objective  # tr(ΦᵀWΦ) + μ Σ w_i |Φ_ij| (docs/maths.md §4)
 from .l1_optimality import L1Stationarity, MaskedGram, l1_stationarity, support_stats
 
 #: zero entries violating (9.9) join the support once their excess (A⁻¹-norm) is ≥ this × the gradient on the
@@ -109,12 +110,6 @@ class FinishResult:
     removed: int
     wall_time: float
     support: dict
-
-
-def true_objective(W, w, mu: float, Phi: np.ndarray, WPhi=None) -> float:
-    """``tr(ΦᵀWΦ) + μ Σ w_i |Φ_ij|`` (docs/maths.md §4)."""
-    WPhi = W @ Phi if WPhi is None else WPhi
-    return float(np.sum(Phi * WPhi) + mu * np.sum(w[:, None] * np.abs(Phi)))
 
 
 class _Restricted:
@@ -382,13 +377,14 @@ def _finish(W, a, w, mu: float, Psi, options: SupportFinish, sigma: float | None
     Psi = np.asarray(Psi, dtype=np.float64)
     n, k = Psi.shape
     before = true_objective(W, w, mu, Psi)
+    WPsi = W @ Psi
     peak = np.max(np.abs(Psi), axis=0, keepdims=True)
     mask = (np.abs(Psi) > options.threshold * peak).astype(np.float64)
     signs = np.sign(Psi) * mask
     if sigma is None:
-        lam0 = MaskedGram(Psi, a).solve(Psi.T @ (2.0 * (W @ Psi) + mu * w[:, None] * np.sign(Psi)))
+        lam0 = MaskedGram(Psi, a).solve(Psi.T @ (2.0 * WPsi + mu * w[:, None] * np.sign(Psi)))
         sigma = max(float(np.max(np.diag(lam0))) / 2.0, 1e-12)
-    scale = float(np.sqrt(np.sum((2.0 * (W @ Psi)) ** 2 / a[:, None])) + mu * np.sqrt(k * np.sum(w**2 / a)))
+    scale = float(np.sqrt(np.sum((2.0 * WPsi) ** 2 / a[:, None])) + mu * np.sqrt(k * np.sum(w**2 / a)))
     gtol_abs = options.gtol * scale
     rounds = newton = cg = products = added = removed = 0
     status = "max_rounds"
