@@ -24,9 +24,7 @@ import argparse
 import importlib.util
 import json
 import os
-import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -39,45 +37,20 @@ jax.config.update("jax_enable_x64", True)  # an application: float64
 import equinox as eqx  # noqa: E402
 import numpy as np  # noqa: E402
 import optimistix as optx  # noqa: E402
-import scipy.sparse as sp  # noqa: E402
 
 import stiefel  # noqa: E402
 from bench.environment import header_lines, run_meta, write_results  # noqa: E402
-from bench.second_order import brockett_problem, cmm_problem  # noqa: E402
+from bench.second_order import brockett_problem, cmm_problem, pymanopt_subprocess  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 RETRACTIONS = ("cayley", "cholesky", "polar")
 DEFAULT_RETRACTION = stiefel.GeneralizedStiefel(np.ones(2), 1).retraction
 
-PEER_SCRIPT = r'''
-import json, sys, time, numpy as np, scipy.sparse as sp
-import pymanopt
-from pymanopt.manifolds import Stiefel
+#: pymanopt's CG on ``bench.second_order.PYMANOPT_PROBLEM``, with its per-iteration log
+PEER_CG = r'''
 from pymanopt.optimizers import ConjugateGradient
-data = np.load(sys.argv[1], allow_pickle=False)
-Wt = sp.load_npz(sys.argv[2]).tocsr()
-Y0, kind, iters = data["Y0"], str(data["kind"]), int(data["iterations"])
-n, k = Y0.shape
-manifold = Stiefel(n, k)
-if kind == "brockett":
-    d = data["d"]
-    @pymanopt.function.numpy(manifold)
-    def cost(Y): return float(np.sum((Y * (Wt @ Y)) @ d))
-    @pymanopt.function.numpy(manifold)
-    def egrad(Y): return 2.0 * (Wt @ Y) * d
-else:
-    a, mu, delta = data["a"], float(data["mu"]), float(data["delta"])
-    ra = np.sqrt(a)[:, None]
-    def huber(x): return np.where(np.abs(x) <= delta, x * x / (2 * delta), np.abs(x) - delta / 2)
-    @pymanopt.function.numpy(manifold)
-    def cost(Y): return float(np.sum(Y * (Wt @ Y)) + mu * np.sum(a[:, None] * huber(Y / ra)))
-    @pymanopt.function.numpy(manifold)
-    def egrad(Y):
-        x = Y / ra
-        return 2.0 * (Wt @ Y) + mu * ra * np.where(np.abs(x) <= delta, x / delta, np.sign(x))
-problem = pymanopt.Problem(manifold, cost, euclidean_gradient=egrad)
-opt = ConjugateGradient(max_iterations=iters, min_gradient_norm=0.0, min_step_size=0.0, verbosity=0,
-                        log_verbosity=1)
+opt = ConjugateGradient(max_iterations=int(data["iterations"]), min_gradient_norm=0.0, min_step_size=0.0,
+                        verbosity=0, log_verbosity=1)
 t = time.perf_counter()
 res = opt.run(problem, initial_point=Y0)
 seconds = time.perf_counter() - t
@@ -120,23 +93,9 @@ def run_ours(problem: dict, retraction: str, iterations: int) -> dict:
 
 def run_peer(problem: dict, python: str, iterations: int) -> dict:
     """pymanopt's ConjugateGradient on the isometric problem on St(n, k), in ``python`` (a subprocess)."""
-    r = np.sqrt(np.asarray(problem["M"]))
-    Wt = sp.diags(1.0 / r) @ problem["W"] @ sp.diags(1.0 / r)
-    Y0 = r[:, None] * np.asarray(problem["X0"])
-    extra = {"d": problem["d"]} if problem["kind"] == "brockett" else {
-        "a": np.asarray(problem["M"]), "mu": problem["mu"], "delta": problem["delta"]}
-    with tempfile.TemporaryDirectory() as tmp:
-        np.savez(Path(tmp) / "data.npz", Y0=Y0, kind=problem["kind"], iterations=iterations, **extra)
-        sp.save_npz(Path(tmp) / "W.npz", sp.csr_matrix(Wt))
-        script = Path(tmp) / "run.py"
-        script.write_text(PEER_SCRIPT)
-        proc = subprocess.run([python, str(script), str(Path(tmp) / "data.npz"), str(Path(tmp) / "W.npz")],
-                              capture_output=True, text=True, timeout=3600,
-                              env={**os.environ, "OPENBLAS_NUM_THREADS": "1"})
-    if proc.returncode != 0:
-        last = [line for line in proc.stderr.splitlines() if line.strip()][-1:] or [f"exit {proc.returncode}"]
-        return {"problem": problem["label"], "solver": "pymanopt CG", "error": last[0][-300:]}
-    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    out, error = pymanopt_subprocess(problem, python, PEER_CG, 3600, iterations=iterations)
+    if out is None:
+        return {"problem": problem["label"], "solver": "pymanopt CG", "error": error}
     steps = max(out["iterations"], 1)
     row = {"problem": problem["label"], "n": problem["n"], "k": problem["k"], "solver": "pymanopt CG",
            "ms_per_iteration": 1e3 * out["seconds"] / steps, "ms_per_iteration_with_compile": 1e3 * out["seconds"] / steps,

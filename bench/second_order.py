@@ -205,14 +205,15 @@ def run_one(problem: dict, name: str, first, second, max_steps: int) -> dict:
     return row
 
 
-PYMANOPT_SCRIPT = r'''
+#: the isometric problem on St(n, k) in pymanopt (module docstring): data from ``pymanopt_subprocess``; a tail script
+#: (``PYMANOPT_TR`` here, bench.peers's CG) runs an optimiser on ``problem`` and prints one JSON line
+PYMANOPT_PROBLEM = r'''
 import json, sys, time, numpy as np, scipy.sparse as sp
 import pymanopt
 from pymanopt.manifolds import Stiefel
-from pymanopt.optimizers import TrustRegions
 data = np.load(sys.argv[1], allow_pickle=False)
 Wt = sp.load_npz(sys.argv[2]).tocsr()
-Y0, kind, gtol, max_time = data["Y0"], str(data["kind"]), float(data["gtol"]), float(data["max_time"])
+Y0, kind = data["Y0"], str(data["kind"])
 n, k = Y0.shape
 manifold = Stiefel(n, k)
 if kind == "brockett":
@@ -238,7 +239,12 @@ else:
         x = Y / ra
         return 2.0 * (Wt @ U) + mu * np.where(np.abs(x) <= delta, 1.0 / delta, 0.0) * U
 problem = pymanopt.Problem(manifold, cost, euclidean_gradient=egrad, euclidean_hessian=ehess)
-opt = TrustRegions(min_gradient_norm=gtol, max_time=max_time, max_iterations=100000, verbosity=0)
+'''
+
+PYMANOPT_TR = r'''
+from pymanopt.optimizers import TrustRegions
+opt = TrustRegions(min_gradient_norm=float(data["gtol"]), max_time=float(data["max_time"]), max_iterations=100000,
+                   verbosity=0)
 t = time.perf_counter()
 res = opt.run(problem, initial_point=Y0)
 print(json.dumps({"iterations": int(res.iterations), "seconds": time.perf_counter() - t, "value": float(res.cost),
@@ -246,26 +252,34 @@ print(json.dumps({"iterations": int(res.iterations), "seconds": time.perf_counte
 '''
 
 
-def run_pymanopt(problem: dict, python: str, gtol: float, max_time: float) -> dict:
-    """pymanopt's TrustRegions on the isometric problem on St(n, k) (module docstring), in ``python``."""
+def pymanopt_subprocess(problem: dict, python: str, tail: str, timeout: float, **params) -> tuple[dict | None, str]:
+    """The isometric problem (``Y = M^{1/2}X``, ``W̃ = M^{-1/2}WM^{-1/2}``) and ``params`` handed to ``python``
+    running ``PYMANOPT_PROBLEM + tail``; returns (its JSON line, "") or (None, the error's last line)."""
     M = np.asarray(problem["M"])
     r = np.sqrt(M)
     Wt = sp.diags(1.0 / r) @ problem["W"] @ sp.diags(1.0 / r)
     Y0 = r[:, None] * np.asarray(problem["X0"])
+    extra = {"d": problem["d"]} if problem["kind"] == "brockett" else {
+        "a": M, "mu": problem["mu"], "delta": problem["delta"]}
     with tempfile.TemporaryDirectory() as tmp:
-        extra = {"d": problem["d"]} if problem["kind"] == "brockett" else {
-            "a": M, "mu": problem["mu"], "delta": problem["delta"]}
-        np.savez(Path(tmp) / "data.npz", Y0=Y0, kind=problem["kind"], gtol=gtol, max_time=max_time, **extra)
+        np.savez(Path(tmp) / "data.npz", Y0=Y0, kind=problem["kind"], **params, **extra)
         sp.save_npz(Path(tmp) / "W.npz", sp.csr_matrix(Wt))
         script = Path(tmp) / "run.py"
-        script.write_text(PYMANOPT_SCRIPT)
+        script.write_text(PYMANOPT_PROBLEM + tail)
         proc = subprocess.run([python, str(script), str(Path(tmp) / "data.npz"), str(Path(tmp) / "W.npz")],
-                              capture_output=True, text=True, timeout=max_time + 600,
+                              capture_output=True, text=True, timeout=timeout,
                               env={**os.environ, "OPENBLAS_NUM_THREADS": "1"})
     if proc.returncode != 0:  # the exception's own line (e.g. a MemoryError naming the array it wanted)
         last = [line for line in proc.stderr.splitlines() if line.strip()][-1:] or ["exit status " + str(proc.returncode)]
-        return {"problem": problem["label"], "solver": "pymanopt TrustRegions", "error": last[0][-300:]}
-    out = json.loads(proc.stdout.strip().splitlines()[-1])
+        return None, last[0][-300:]
+    return json.loads(proc.stdout.strip().splitlines()[-1]), ""
+
+
+def run_pymanopt(problem: dict, python: str, gtol: float, max_time: float) -> dict:
+    """pymanopt's TrustRegions on the isometric problem on St(n, k) (module docstring), in ``python``."""
+    out, error = pymanopt_subprocess(problem, python, PYMANOPT_TR, max_time + 600, gtol=gtol, max_time=max_time)
+    if out is None:
+        return {"problem": problem["label"], "solver": "pymanopt TrustRegions", "error": error}
     row = {"problem": problem["label"], "n": problem["n"], "k": problem["k"], "solver": "pymanopt TrustRegions",
            "status": "converged" if out["grad_norm"] <= gtol else f"stopped ({out['reason']})", **out}
     print(json.dumps(row), flush=True)
