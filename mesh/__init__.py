@@ -69,6 +69,15 @@ from .laplacian import AREAS, WEIGHTS, Laplacian, area_matrix, laplacian, robust
 from .laplacian_jax import laplacian_jax, mass_diagonal_jax, weight_operator_jax
 from .ordering import inverse_permutation, permutation_matrix, permute, reorder
 from .sampling import LocalFunctions, local_functions, poisson_disk_sample
+from .segmentation import (
+    SegmentMatch,
+    SegmentMatchError,
+    Segmentation,
+    SegmentationError,
+    match_segments,
+    persistence_segmentation,
+    segment_indicators,
+)
 
 __all__ = [
     "AREAS",
@@ -121,6 +130,13 @@ __all__ = [
     "reorder",
     "robust_laplacian",
     "scaled_to_unit_area",
+    "SegmentMatch",
+    "SegmentMatchError",
+    "Segmentation",
+    "SegmentationError",
+    "match_segments",
+    "persistence_segmentation",
+    "segment_indicators",
     "vertex_positions",
     "wks",
     "weight_operator_jax",

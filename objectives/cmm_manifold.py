@@ -25,7 +25,7 @@ from stiefel.driver import Progress
 from stiefel.minimisers import STALL_WINDOW_MAX
 from stiefel.operators import SparseOperator
 
-from . import smoothings
+from . import cmm_saddle, smoothings
 from .active_set import ActiveSetPreconditioner
 from .admm import l1_weights_np, orthonormalize
 from .energies import cmm_energy
@@ -219,6 +219,14 @@ class BlockCMM(_SmoothedSolver):
       rows, neighbour-table width and factor entries on a grid growing by this factor) so that meshes
       of similar size share one compiled solver, also across processes through JAX's persistent
       cache; the padded rows stay exactly zero. None: exact shapes. Only with the shifted preconditioner.
+    saddle_checks: at most this many saddle checks in the last stage (0: none; ``objectives.cmm_saddle``):
+      while the stage has not passed one it stops at the looser relative decrease ``saddle_ftol``, measures
+      the Hessian's most negative curvature θ (30 LOBPCG products) and, when θ < −``saddle_tol``·σ (σ the
+      preconditioner's shift, λ_{k−1} by default), steps off along it and resumes; a passed check moves
+      the stage on to ``ftol``, where one more check is made. The result
+      records each (θ, step, decrease, iteration) in ``params["saddles"]``. Measured on example:bumpy (k = 10, μ = 2λ₉): the
+      stall test had stopped on a saddle's plateau at 1802.50 (θ = −89); with the checks the solve ends
+      at the ADMM's objective (``bench/RESULTS_saddle.md``).
     """
 
     name: ClassVar[str] = "block"
@@ -230,9 +238,15 @@ class BlockCMM(_SmoothedSolver):
     preconditioner: str = "shifted"
     refresh: int = 50
     bucket_growth: float | None = DEFAULT_GROWTH
+    saddle_checks: int = 4
+    saddle_ftol: float = 1e-5
+    saddle_tol: float = 1e-3
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        _check_int("saddle_checks", self.saddle_checks, 0)
+        _check_number("saddle_ftol", self.saddle_ftol, 0)
+        _check_number("saddle_tol", self.saddle_tol, 0)
         try:
             check_growth(self.bucket_growth)
         except ValueError as e:
@@ -266,32 +280,54 @@ class BlockCMM(_SmoothedSolver):
         X = host_array(padded.pad(orthonormalize(np.asarray(start.X0, dtype=np.float64), a)), dt)
         iters, wall, compile_t, status = 0, t_factor, 0.0, "converged"
         times, values, true_values = [], [], []
-        active = None
+        active, checks = None, []
         for stage, s in enumerate(schedule):
             if iters >= self.max_iters:  # the total is spent: the remaining stages are skipped
                 status = "max_iters"
                 break
             F = energy.with_params(eps=s * ratio_e, delta=s * ratio_d)
-            # intermediate stages only need the arrangement of the modes: stop once they stall
             last = stage == len(schedule) - 1
-            stop = dict(ftol=self.ftol) if last else dict(ftol=max(self.ftol, self.stage_ftol),
-                                                          ftol_window=self.stage_window)
             if P is None:
                 if active is None:
                     active = ActiveSetPreconditioner(W, a, sigma, mu, l1_weights_np(a, weighting), s)
                 active.set_width(s)
-            report = None if progress is None else _staged(progress, iters, wall, stage, len(schedule))
-            X, it_stage, st, t_run, t_compile, h = _block_rounds(
-                F, manifold, X, P if P is not None else active, gtol=self.gtol, max_iters=self.max_iters,
-                budget=self.max_iters - iters, refresh=self.refresh, optimizer=self.optimizer, progress=report,
-                stop=stop_signal, **stop)
-            iters += it_stage
-            first = 0 if stage == 0 else 1  # a later stage's entry 0 is the previous stage's last iterate
-            true_values.extend(list(h["monitor"][first:]))
-            times.extend(list(wall + h["time"][first:]))
-            values.extend(list(h["value"][first:]))
-            wall += t_run
-            compile_t += t_compile
+            st, tight = None, not last or self.saddle_checks == 0
+            while True:
+                # intermediate stages only need the arrangement of the modes: stop once they stall; the last
+                # stops at the looser saddle_ftol while it has not passed a saddle check (cmm_saddle)
+                if not last:
+                    stop = dict(ftol=max(self.ftol, self.stage_ftol), ftol_window=self.stage_window)
+                else:
+                    stop = dict(ftol=self.ftol if tight else max(self.ftol, self.saddle_ftol))
+                report = None if progress is None else _staged(progress, iters, wall, stage, len(schedule))
+                X, it_stage, st, t_run, t_compile, h = _block_rounds(
+                    F, manifold, X, P if P is not None else active, gtol=self.gtol, max_iters=self.max_iters,
+                    budget=self.max_iters - iters, refresh=self.refresh, optimizer=self.optimizer,
+                    progress=report, stop=stop_signal, **stop)
+                iters += it_stage
+                first = 0 if not times else 1  # a later run's entry 0 is the previous run's last iterate
+                true_values.extend(list(h["monitor"][first:]))
+                times.extend(list(wall + h["time"][first:]))
+                values.extend(list(h["value"][first:]))
+                wall += t_run
+                compile_t += t_compile
+                if not last or st != "converged":
+                    break
+                if len(checks) < self.saddle_checks:
+                    X_new, record, t_run, t_compile = cmm_saddle.check(
+                        F, manifold, X, P, width=max(s * ratio_e, s * ratio_d), threshold=self.saddle_tol * sigma)
+                    wall += t_run
+                    compile_t += t_compile
+                    checks.append(dict(record, iteration=iters))
+                    if X_new is not None:  # stepped off a saddle: resume (the stall test loose again)
+                        X, tight = X_new, False
+                        if iters >= self.max_iters:
+                            st = "max_iters"
+                            break
+                        continue
+                if tight:
+                    break
+                tight = True  # no saddle where the loose test stopped: on to the final tolerance
             if st != "converged":
                 status = st
             if st == "interrupted":
@@ -299,7 +335,10 @@ class BlockCMM(_SmoothedSolver):
         history = {"time": np.asarray(times), "smoothed_objective": np.asarray(values),
                    "objective": np.asarray(true_values)}
         Psi = orthonormalize(padded.unpad(np.asarray(X, dtype=np.float64)), a)  # exact A-orthonormality
-        return SolverRun(Psi, iters, status, wall, compile_t, history, {"padded_size": padded.size})
+        info = {"padded_size": padded.size}
+        if checks:
+            info["saddles"] = checks
+        return SolverRun(Psi, iters, status, wall, compile_t, history, info)
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)

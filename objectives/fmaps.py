@@ -1,18 +1,24 @@
-"""Functional maps between meshes (thesis §5.1–5.2; docs/maths.md §8).
+"""Functional maps between meshes (thesis §5.1–5.3; docs/maths.md §8).
 
 Convention (differs from the thesis by a transpose): ``C`` is ``(k_tgt, k_src)`` and maps
 source coefficients to target coefficients, ``b ≈ C a``. The thesis writes ``B ≈ CᵀA``
 (eq. 5.1.7), i.e. its ``C`` is our ``Cᵀ``.
 
 * ``functional_map`` — least squares for ``C`` from function constraints
-  ``C (B_srcᵀA_src F_src) ≈ B_tgtᵀA_tgt F_tgt`` plus commutativity with diagonal
-  operators (Laplacian eigenvalues), the objective of eq. 5.1.11/5.1.12::
+  ``C (B_srcᵀA_src F_src) ≈ B_tgtᵀA_tgt F_tgt`` plus commutativity with operators written in
+  the bases, the objective of eq. 5.1.11/5.1.12::
 
-      ‖C a − b‖_F² + w ‖Λ_tgt C − C Λ_src‖_F².
+      ‖C a − b‖_F² + w ‖T C − C S‖_F²      (S (k_src, k_src), T (k_tgt, k_tgt)).
 
-  With diagonal ``Λ`` the second term is ``Σ_ij (λ^tgt_i − λ^src_j)² C_ij²``, so the
-  problem splits into one ridge-regularised least-squares problem per row of ``C``
-  (``k_src`` unknowns each); the ``k² × k²`` Kronecker system is never formed.
+  Eigenbases: ``S = Λ_src``, ``T = Λ_tgt`` diagonal (``evals_*``); the second term is
+  ``Σ_ij (λ^tgt_i − λ^src_j)² C_ij²`` and the problem splits into one ridge-regularised
+  least-squares problem per row of ``C`` (``k_src`` unknowns each).
+  Any basis (CMMs, LMHs, GLMHs; §5.3): the full ``S = ΨᵀWΨ`` (``basis_operator``, ``op_*``).
+  Symmetric ``S = PΣPᵀ``, ``T = QΛQᵀ``: with ``Ĉ = QᵀCP``, ``â = Pᵀa``, ``b̂ = Qᵀb`` the objective
+  is ``‖Ĉâ − b̂‖² + w‖ΛĈ − ĈΣ‖²`` (orthogonal factors leave Frobenius norms unchanged), the
+  diagonal case; ``C = QĈPᵀ``. Non-symmetric operators: the ``k_tgt·k_src``-unknown Kronecker
+  normal equations (dense, capped at ``KRONECKER_MAX_UNKNOWNS``). In no case is the
+  ``k_tgt(f + k_src) × k_tgt·k_src`` stacked system of eq. 5.1.11 formed.
 * ``p2p_from_fmap`` — nearest neighbours in coefficient space (§5.1.4, cKDTree).
 * ``icp_refine`` — alternate p2p extraction and orthogonal Procrustes (§5.1.5).
 * Errors (§5.2): ``err_s`` (5.2.23), ``err_t`` (5.2.24), ``err_gd`` (5.2.26, the mean:
@@ -26,6 +32,7 @@ import warnings
 
 import numpy as np
 import scipy.linalg as sla
+from jaxtyping import Float
 from scipy.spatial import cKDTree
 
 from .evaluation import RankDeficientWarning, _apply_A, _as2d, reconstruction_error
@@ -33,6 +40,9 @@ from .evaluation import RankDeficientWarning, _apply_A, _as2d, reconstruction_er
 __all__ = [
     "FmapShapeError",
     "TooFewFunctionsError",
+    "FmapCommutativityError",
+    "KRONECKER_MAX_UNKNOWNS",
+    "basis_operator",
     "function_coefficients",
     "functional_map",
     "p2p_from_fmap",
@@ -45,13 +55,32 @@ __all__ = [
     "c_orthogonality_error",
 ]
 
+#: Largest ``k_tgt·k_src`` for the dense Kronecker route (non-symmetric operators): its
+#: normal matrix is ``(k_tgt·k_src)²`` doubles, 134 MB at this size.
+KRONECKER_MAX_UNKNOWNS = 4096
+_SYMMETRY_RTOL = 1e-10  # ‖Op − Opᵀ‖_F ≤ this · ‖Op‖_F counts as symmetric (rounding in ΨᵀWΨ is ~1e-16)
+_OP_SOLVERS = ("auto", "eigh", "kronecker")
+# Shape aliases (module level so that pyflakes does not parse the dimension strings as annotations).
+_Basis, _Op = Float[np.ndarray, "n k"], Float[np.ndarray, "k k"]
+_BasisSrc, _BasisTgt = Float[np.ndarray, "n_src k_src"], Float[np.ndarray, "n_tgt k_tgt"]
+_FunSrc, _FunTgt = Float[np.ndarray, "n_src f"], Float[np.ndarray, "n_tgt f"]
+_EvalsSrc, _EvalsTgt = Float[np.ndarray, " k_src"], Float[np.ndarray, " k_tgt"]
+_OpSrc, _OpTgt = Float[np.ndarray, "k_src k_src"], Float[np.ndarray, "k_tgt k_tgt"]
+_Map = Float[np.ndarray, "k_tgt k_src"]
+
 
 class FmapShapeError(ValueError):
-    """Inconsistent shapes among bases, functions, area matrices or eigenvalues."""
+    """Inconsistent shapes among bases, functions, area matrices, eigenvalues or operators."""
 
 
 class TooFewFunctionsError(ValueError):
     """Fewer corresponding functions than source basis vectors (f < k): C is not determined (docs/maths.md note 10)."""
+
+
+class FmapCommutativityError(ValueError):
+    """The commutativity term is ill-posed: negative or non-finite weight, missing or doubly given operators
+    (``evals_*`` and ``op_*``), non-finite or non-symmetric operators where symmetry is needed, or a
+    Kronecker system too large to form."""
 
 
 def _check_basis_and_functions(B, F, A, side):
@@ -64,31 +93,153 @@ def _check_basis_and_functions(B, F, A, side):
     return B, F
 
 
+def _asymmetry(M) -> float:
+    """``‖M − Mᵀ‖_F / ‖M‖_F`` (0 for the zero matrix)."""
+    scale = np.linalg.norm(M)
+    return float(np.linalg.norm(M - M.T) / scale) if scale > 0 else 0.0
+
+
+def basis_operator(Psi: _Basis, W) -> _Op:
+    """The operator ``W`` written in an A-orthonormal basis: ``sym(ΨᵀWΨ)`` (``(k, k)``; thesis §5.3).
+
+    With ``ΨᵀAΨ = I`` this is the coefficient matrix ``S`` of ``L = A⁻¹W`` on span Ψ (``LΨ ≈ ΨS``,
+    the A-orthogonal projection; eq. 5.1.5): ``diag(λ)`` for an eigenbasis ``WΦ = AΦΛ``, a full
+    symmetric matrix for CMMs, LMHs and GLMHs. The rounding asymmetry of the product is removed.
+
+    Args:
+      Psi: ``(n, k)`` basis.
+      W: ``(n, n)`` symmetric weight (stiffness) matrix, scipy sparse or dense, or its diagonal ``(n,)``.
+    Returns:
+      ``(k, k)`` symmetric, for ``op_src``/``op_tgt`` of ``functional_map``.
+    Raises:
+      FmapShapeError: ``Psi`` not 2-D, or ``W`` not ``(n, n)``/``(n,)`` with ``n = Psi.shape[0]``.
+      FmapCommutativityError: non-finite result, or ``ΨᵀWΨ`` clearly non-symmetric (``W`` is not symmetric,
+        e.g. ``L = A⁻¹W`` was passed instead of ``W``).
+    """
+    Psi = np.asarray(Psi, dtype=np.float64)
+    if Psi.ndim != 2:
+        raise FmapShapeError(f"Psi must be (n, k), got shape {Psi.shape}")
+    n = Psi.shape[0]
+    shape = tuple(W.shape) if hasattr(W, "shape") else np.shape(W)
+    if shape not in ((n, n), (n,)):
+        raise FmapShapeError(f"W has shape {shape}; expected ({n}, {n}) or its diagonal ({n},) "
+                             f"to match Psi {Psi.shape}")
+    M = Psi.T @ _apply_A(W, Psi)
+    if not np.all(np.isfinite(M)):
+        raise FmapCommutativityError("ΨᵀWΨ has non-finite entries: Psi or W contains NaN/inf")
+    if _asymmetry(M) > 1e-8:
+        raise FmapCommutativityError(f"ΨᵀWΨ is not symmetric (relative asymmetry {_asymmetry(M):.1e}): pass the "
+                                     "symmetric weight matrix W, not the Laplacian L = A⁻¹W")
+    return 0.5 * (M + M.T)
+
+
 def function_coefficients(B, F, A):
     """Coefficients ``BᵀAF`` (``(k, f)``) of functions ``F (n, f)`` in an A-orthonormal basis ``B (n, k)`` (eq. 4.2.3)."""
     return B.T @ _apply_A(A, F)
 
 
-def functional_map(B_src, B_tgt, F_src, F_tgt, A_src, A_tgt, *, evals_src=None, evals_tgt=None,
-                   commutativity: float = 0.0):
-    """Least-squares functional map ``C (k_tgt, k_src)`` (§5.1.1, eq. 5.1.11–5.1.12).
+def _commutativity_operators(evals_src, evals_tgt, op_src, op_tgt, k_src, k_tgt, needed):
+    """Validated operators: ``(S (k_src,), T (k_tgt,))`` diagonals or ``(S, T)`` full square arrays; ``None`` if absent."""
+    has_evals = evals_src is not None or evals_tgt is not None
+    has_ops = op_src is not None or op_tgt is not None
+    if has_evals and has_ops:
+        raise FmapCommutativityError("give either evals_src/evals_tgt (eigenbases) or op_src/op_tgt (any basis, "
+                                     "e.g. from basis_operator), not both")
+    if has_evals:
+        if evals_src is None or evals_tgt is None:
+            raise FmapCommutativityError("pass both evals_src (k_src,) and evals_tgt (k_tgt,)")
+        S = np.asarray(evals_src, dtype=np.float64).reshape(-1)
+        T = np.asarray(evals_tgt, dtype=np.float64).reshape(-1)
+        if S.shape != (k_src,) or T.shape != (k_tgt,):
+            raise FmapShapeError(f"eigenvalues {S.shape}, {T.shape} do not match the bases ({k_src},), ({k_tgt},)")
+    elif has_ops:
+        if op_src is None or op_tgt is None:
+            raise FmapCommutativityError("pass both op_src (k_src, k_src) and op_tgt (k_tgt, k_tgt)")
+        S, T = np.asarray(op_src, dtype=np.float64), np.asarray(op_tgt, dtype=np.float64)
+        for name, M, k, side in (("op_src", S, k_src, "k_src"), ("op_tgt", T, k_tgt, "k_tgt")):
+            if M.shape != (k, k):
+                raise FmapShapeError(f"{name} has shape {M.shape}; expected ({side}, {side}) = ({k}, {k}), "
+                                     f"square and matching the basis (basis_operator(Psi, W) builds it)")
+    elif needed:
+        raise FmapCommutativityError("commutativity > 0 needs evals_src (k_src,) and evals_tgt (k_tgt,), "
+                                     "or op_src (k_src, k_src) and op_tgt (k_tgt, k_tgt) from basis_operator")
+    else:
+        return None
+    for name, M in (("source", S), ("target", T)):
+        if not np.all(np.isfinite(M)):
+            raise FmapCommutativityError(f"the {name} operator has {int(np.sum(~np.isfinite(M)))} non-finite "
+                                         "entries; check the basis and W")
+    return S, T
 
-    Minimises ``‖C a − b‖_F² + w Σ_ij (λ^tgt_i − λ^src_j)² C_ij²`` with ``a = B_srcᵀA_src F_src``
-    ``(k_src, f)``, ``b = B_tgtᵀA_tgt F_tgt`` ``(k_tgt, f)`` and ``w = commutativity``.
-    Row ``i`` of ``C`` solves ``min ‖aᵀc − b_iᵀ‖² + w ‖D_i c‖²``, ``D_i = diag(|λ^tgt_i − λ^src|)``,
-    as a stacked ``(f + k_src) × k_src`` least-squares problem (no Kronecker system).
+
+def _solve_diagonal(a, b, ls, lt, w):
+    """``min ‖Ca − b‖² + w Σ_ij (lt_i − ls_j)² C_ij²``: row ``i`` is a stacked ``(f + k_src) × k_src`` least squares."""
+    k_tgt, k_src = b.shape[0], a.shape[0]
+    sw = np.sqrt(w)
+    C = np.empty((k_tgt, k_src))
+    rhs_pad = np.zeros(k_src)
+    for i in range(k_tgt):  # row i: min ‖aᵀc − b_iᵀ‖² + w ‖D_i c‖², D_i = diag(|lt_i − ls|)
+        lhs = np.vstack([a.T, np.diag(sw * np.abs(lt[i] - ls))])
+        C[i] = sla.lstsq(lhs, np.concatenate([b[i], rhs_pad]), lapack_driver="gelsd")[0]
+    return C
+
+
+def _solve_rotated(a, b, S, T, w):
+    """Symmetric ``S = PΣPᵀ``, ``T = QΛQᵀ``: the diagonal problem for ``Ĉ = QᵀCP`` with ``â = Pᵀa``, ``b̂ = Qᵀb``."""
+    sig, P = np.linalg.eigh(0.5 * (S + S.T))
+    lam, Q = np.linalg.eigh(0.5 * (T + T.T))
+    return Q @ _solve_diagonal(P.T @ a, Q.T @ b, sig, lam, w) @ P.T
+
+
+def _solve_kronecker(a, b, S, T, w):
+    """Normal equations of ``‖Ca − b‖² + w‖TC − CS‖²`` in ``x = vec C`` (column-major, Lemma 5.1.6).
+
+    ``vec(Ca) = (aᵀ ⊗ I_t) x`` and ``vec(TC − CS) = K x``, ``K = I_s ⊗ T − Sᵀ ⊗ I_t``, so
+    ``(aaᵀ ⊗ I_t + w KᵀK) x = vec(baᵀ)`` with ``KᵀK = I_s ⊗ TᵀT − S ⊗ T − Sᵀ ⊗ Tᵀ + SSᵀ ⊗ I_t``.
+    """
+    k_tgt, k_src = b.shape[0], a.shape[0]
+    I_s, I_t = np.eye(k_src), np.eye(k_tgt)
+    G = np.kron(a @ a.T + w * (S @ S.T), I_t)
+    G += w * (np.kron(I_s, T.T @ T) - np.kron(S, T) - np.kron(S.T, T.T))
+    rhs = (b @ a.T).reshape(-1, order="F")
+    try:
+        x = sla.cho_solve(sla.cho_factor(G), rhs)
+    except np.linalg.LinAlgError:  # singular (rank-deficient a): minimum-norm solution
+        x = sla.lstsq(G, rhs, lapack_driver="gelsy")[0]
+    return x.reshape((k_tgt, k_src), order="F")
+
+
+def functional_map(B_src: _BasisSrc, B_tgt: _BasisTgt, F_src: _FunSrc, F_tgt: _FunTgt, A_src, A_tgt, *,
+                   evals_src: _EvalsSrc | None = None, evals_tgt: _EvalsTgt | None = None,
+                   op_src: _OpSrc | None = None, op_tgt: _OpTgt | None = None, commutativity: float = 0.0, op_solver: str = "auto") -> _Map:
+    """Least-squares functional map ``C (k_tgt, k_src)`` (§5.1.1, eq. 5.1.11–5.1.12; §5.3 for non-eigen bases).
+
+    Minimises ``‖C a − b‖_F² + w ‖T C − C S‖_F²`` with ``a = B_srcᵀA_src F_src`` ``(k_src, f)``,
+    ``b = B_tgtᵀA_tgt F_tgt`` ``(k_tgt, f)``, ``w = commutativity`` and the operators in the bases:
+    ``S = diag(evals_src)``, ``T = diag(evals_tgt)`` (eigenbases), or ``S = op_src``, ``T = op_tgt``
+    (any basis; ``basis_operator(Ψ, W) = ΨᵀWΨ``, thesis §5.3). Diagonal operators (``evals_*``, or
+    ``op_*`` with zero off-diagonal entries) are solved row by row; symmetric full operators by
+    diagonalising them and solving the rotated diagonal problem (module docstring); non-symmetric
+    ones by the Kronecker normal equations (``k_tgt·k_src ≤ KRONECKER_MAX_UNKNOWNS``).
 
     Args:
       B_src: ``(n_src, k_src)``, B_tgt: ``(n_tgt, k_tgt)`` bases, A-orthonormal on their meshes.
       F_src: ``(n_src, f)``, F_tgt: ``(n_tgt, f)`` corresponding functions (column j ↔ column j).
       A_src, A_tgt: area matrices (sparse ``(n, n)`` or diagonal ``(n,)``).
-      evals_src: ``(k_src,)``, evals_tgt: ``(k_tgt,)`` eigenvalues (needed if ``commutativity > 0``).
+      evals_src: ``(k_src,)``, evals_tgt: ``(k_tgt,)`` eigenvalues (eigenbases), or
+      op_src: ``(k_src, k_src)``, op_tgt: ``(k_tgt, k_tgt)`` operators; one pair is needed if ``w > 0``.
       commutativity: weight ``w ≥ 0`` of the operator constraints (5.1.8).
+      op_solver: for full operators, ``"auto"`` (``"eigh"`` if both are symmetric to relative
+        ``1e-10``, else ``"kronecker"``), ``"eigh"`` (symmetric only; the symmetric part is used) or
+        ``"kronecker"`` (any operators, also diagonal ones).
     Returns:
       ``C (k_tgt, k_src)``.
     Raises:
       TooFewFunctionsError: ``f < k_src`` (docs/maths.md note 10).
-      FmapShapeError: inconsistent shapes.
+      FmapShapeError: inconsistent shapes (bases, functions, areas, eigenvalues, non-square operators).
+      FmapCommutativityError: ``w`` negative or not finite; both ``evals_*`` and ``op_*`` given, only one of
+        a pair, or neither while ``w > 0``; non-finite operators; a non-symmetric operator with
+        ``op_solver="eigh"``; a Kronecker system above ``KRONECKER_MAX_UNKNOWNS``.
     Warns:
       RankDeficientWarning: ``f ≥ k_src`` but the source coefficients have rank < k_src
         (e.g. repeated functions) and ``commutativity == 0``; the minimum-norm C is returned.
@@ -102,30 +253,40 @@ def functional_map(B_src, B_tgt, F_src, F_tgt, A_src, A_tgt, *, evals_src=None, 
     if f < k_src:
         raise TooFewFunctionsError(f"{f} functions cannot determine a map from {k_src} basis vectors: "
                                    f"need f ≥ k_src (docs/maths.md note 10); add descriptors or truncate the basis")
-    if commutativity < 0:
-        raise ValueError("commutativity must be ≥ 0")
+    w = float(commutativity)
+    if not np.isfinite(w) or w < 0:
+        raise FmapCommutativityError(f"commutativity must be finite and ≥ 0, got {commutativity!r}")
+    if op_solver not in _OP_SOLVERS:
+        raise ValueError(f"unknown op_solver {op_solver!r}; choose one of {_OP_SOLVERS}")
+    ops = _commutativity_operators(evals_src, evals_tgt, op_src, op_tgt, k_src, k_tgt, needed=w > 0)
     a = function_coefficients(B_src, F_src, A_src)  # (k_src, f)
     b = function_coefficients(B_tgt, F_tgt, A_tgt)  # (k_tgt, f)
-    if commutativity == 0.0:
+    if w == 0.0:
         Ct, _, rank, _ = sla.lstsq(a.T, b.T, lapack_driver="gelsd")  # a.T Cᵀ = b.T
         if rank < k_src:
             warnings.warn(f"source coefficients have rank {rank} < k_src = {k_src} (repeated or dependent "
                           "functions): the map is not determined; returning the minimum-norm solution",
                           RankDeficientWarning, stacklevel=2)
         return np.ascontiguousarray(Ct.T)
-    if evals_src is None or evals_tgt is None:
-        raise ValueError("commutativity > 0 needs evals_src (k_src,) and evals_tgt (k_tgt,)")
-    ls = np.asarray(evals_src, dtype=np.float64).reshape(-1)
-    lt = np.asarray(evals_tgt, dtype=np.float64).reshape(-1)
-    if ls.shape != (k_src,) or lt.shape != (k_tgt,):
-        raise FmapShapeError(f"eigenvalues {ls.shape}, {lt.shape} do not match the bases ({k_src},), ({k_tgt},)")
-    sw = np.sqrt(commutativity)
-    C = np.empty((k_tgt, k_src))
-    rhs_pad = np.zeros(k_src)
-    for i in range(k_tgt):  # k_tgt small problems of size (f + k_src) × k_src
-        lhs = np.vstack([a.T, np.diag(sw * np.abs(lt[i] - ls))])
-        C[i] = sla.lstsq(lhs, np.concatenate([b[i], rhs_pad]), lapack_driver="gelsd")[0]
-    return C
+    S, T = ops
+    if S.ndim == 1:
+        return _solve_diagonal(a, b, S, T, w)
+    if op_solver == "kronecker" or (op_solver == "auto" and max(_asymmetry(S), _asymmetry(T)) > _SYMMETRY_RTOL):
+        if k_src * k_tgt > KRONECKER_MAX_UNKNOWNS:
+            raise FmapCommutativityError(
+                f"non-symmetric operators need the dense Kronecker system with k_tgt·k_src = {k_tgt * k_src} > "
+                f"KRONECKER_MAX_UNKNOWNS = {KRONECKER_MAX_UNKNOWNS} unknowns; use symmetric operators "
+                "(basis_operator(Psi, W)) for the eigh route, or truncate the bases")
+        return _solve_kronecker(a, b, S, T, w)
+    for name, M in (("op_src", S), ("op_tgt", T)):
+        if _asymmetry(M) > _SYMMETRY_RTOL:
+            raise FmapCommutativityError(
+                f"{name} is not symmetric (relative asymmetry {_asymmetry(M):.1e} > {_SYMMETRY_RTOL:.0e}); "
+                "op_solver='eigh' needs symmetric operators: build them with basis_operator(Psi, W), "
+                "or pass op_solver='kronecker' (or 'auto')")
+    if not (S - np.diag(np.diag(S))).any() and not (T - np.diag(np.diag(T))).any():
+        return _solve_diagonal(a, b, np.diag(S).copy(), np.diag(T).copy(), w)  # exactly the evals path
+    return _solve_rotated(a, b, S, T, w)
 
 
 def p2p_from_fmap(C, B_src, B_tgt, *, direction: str = "tgt_to_src"):

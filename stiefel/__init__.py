@@ -19,7 +19,9 @@ Public API (docs/maths.md §1–3):
   ``minimize_sequential`` (thesis Algorithm 6); ``solve_block``, the block solver as a pure
   jittable/vmappable function.
 * ``RiemannianImplicitAdjoint`` — derivatives of solutions by the implicit function theorem
-  (docs/maths.md §9); ``riemannian_hessian``, ``hessian_operator`` — the Riemannian Hessian.
+  (docs/maths.md §9); ``riemannian_hessian``, ``hessian_operator`` — the Riemannian Hessian;
+  ``negative_curvature`` (its most negative curvature by LOBPCG: a saddle test) and ``escape_step``
+  (a step off a saddle along it) — ``stiefel.saddle`` (docs/maths.md §9, eq. 9.18).
 * ``Result``, ``SequentialResult``, ``Status``, ``History`` — solver outcomes; ``Progress`` — what a
   ``progress=`` callback receives between compiled chunks of iterations (``stiefel.driver``), and
   ``CallbackError`` when that callback raises.
@@ -52,6 +54,7 @@ from .driver import CallbackError, Progress
 from .checks import SlopeCheck, check_gradient, check_hessian, check_retraction
 from .grassmann import Grassmann, sphere, stiefel
 from .hessian import hessian_operator, riemannian_hessian
+from .saddle import Curvature, EscapeStep, escape_step, negative_curvature
 from .implicit import RiemannianImplicitAdjoint, riemannian_residual, tangent_solve
 from .minimisers import RiemannianBB, RiemannianCG, RiemannianLBFGS
 from .tcg import TCGStop, truncated_cg

@@ -203,3 +203,167 @@ def test_bad_input(iso):
     Fp_rep = np.tile(d["Fp"][:, :4], (1, 4))
     with pytest.warns(RankDeficientWarning, match="rank 4 < k_src"):
         fmaps.functional_map(d["Phi"], d["Phi_p"], F_rep, Fp_rep, A_s, A_t)
+
+
+# ---- commutativity with full operators (any basis; thesis §5.3) -------------------------------------------------
+
+
+def _kron_reference(a, b, S, T, w):
+    """Dense least squares of eq. 5.1.11 for ``‖Ca − b‖² + w‖TC − CS‖²`` with ``np.kron`` (column-major vec)."""
+    kt, ks = b.shape[0], a.shape[0]
+    lhs = np.vstack([np.kron(a.T, np.eye(kt)), np.sqrt(w) * (np.kron(np.eye(ks), T) - np.kron(S.T, np.eye(kt)))])
+    rhs = np.concatenate([b.reshape(-1, order="F"), np.zeros(kt * ks)])
+    return np.linalg.lstsq(lhs, rhs, rcond=None)[0].reshape((kt, ks), order="F")
+
+
+def _random_problem(seed, ks, kt, f=None, n=40):
+    """Orthonormal bases (A = None: Euclidean) and functions on ``n`` points: ``a = B_srcᵀF_src``, ``b = B_tgtᵀF_tgt``."""
+    rng = np.random.default_rng(seed)
+    f = f or ks + 3
+    Bs, Bt = np.linalg.qr(rng.standard_normal((n, ks)))[0], np.linalg.qr(rng.standard_normal((n, kt)))[0]
+    Fs, Ft = rng.standard_normal((n, f)), rng.standard_normal((n, f))
+    return rng, Bs, Bt, Fs, Ft, Bs.T @ Fs, Bt.T @ Ft
+
+
+def _sym(rng, k):
+    X = rng.standard_normal((k, k))
+    return X + X.T
+
+
+@pytest.mark.parametrize("seed, ks, kt, w", [(0, 5, 4, 0.3), (1, 6, 6, 1.0), (2, 4, 7, 0.05), (3, 8, 5, 10.0)])
+def test_full_symmetric_operators_match_kronecker_lstsq(seed, ks, kt, w):
+    rng, Bs, Bt, Fs, Ft, a, b = _random_problem(seed, ks, kt)
+    S, T = _sym(rng, ks), _sym(rng, kt)
+    ref = _kron_reference(a, b, S, T, w)
+    for solver in ("auto", "eigh", "kronecker"):
+        C = fmaps.functional_map(Bs, Bt, Fs, Ft, None, None, op_src=S, op_tgt=T, commutativity=w, op_solver=solver)
+        np.testing.assert_allclose(C, ref, rtol=1e-9, atol=1e-10 * np.abs(ref).max(), err_msg=solver)
+    # the reference is not a trivial map: both terms pull, and the operator term changes the answer
+    C0 = fmaps.functional_map(Bs, Bt, Fs, Ft, None, None)
+    assert np.linalg.norm(ref - C0) > 1e-3 * np.linalg.norm(C0)
+
+
+@pytest.mark.parametrize("seed, ks, kt", [(4, 5, 4), (5, 6, 6)])
+def test_non_symmetric_operators_use_kronecker_route(seed, ks, kt):
+    rng, Bs, Bt, Fs, Ft, a, b = _random_problem(seed, ks, kt)
+    S, T = rng.standard_normal((ks, ks)), rng.standard_normal((kt, kt))
+    ref = _kron_reference(a, b, S, T, 0.7)
+    for solver in ("auto", "kronecker"):
+        C = fmaps.functional_map(Bs, Bt, Fs, Ft, None, None, op_src=S, op_tgt=T, commutativity=0.7, op_solver=solver)
+        np.testing.assert_allclose(C, ref, rtol=1e-9, atol=1e-10 * np.abs(ref).max())
+    # the symmetric parts give a different map: the route is not silently symmetrising
+    Csym = fmaps.functional_map(Bs, Bt, Fs, Ft, None, None, op_src=(S + S.T) / 2, op_tgt=(T + T.T) / 2,
+                                commutativity=0.7)
+    assert np.linalg.norm(Csym - ref) > 1e-3 * np.linalg.norm(ref)
+
+
+def test_diagonal_operators_and_rotated_bases_reproduce_evals_path(noisy):
+    d = noisy
+    args = (d["Phi"], d["Phi_n"], d["F"], d["Fn"], d["lap"].A, d["lap_n"].A)
+    w = 3e-4
+    C = fmaps.functional_map(*args, evals_src=d["lam"], evals_tgt=d["lam_n"], commutativity=w)
+    Cop = fmaps.functional_map(*args, op_src=np.diag(d["lam"]), op_tgt=np.diag(d["lam_n"]), commutativity=w)
+    np.testing.assert_array_equal(Cop, C)  # exactly the diagonal code path
+    Ckr = fmaps.functional_map(*args, op_src=np.diag(d["lam"]), op_tgt=np.diag(d["lam_n"]), commutativity=w,
+                               op_solver="kronecker")
+    np.testing.assert_allclose(Ckr, C, rtol=0, atol=1e-12)  # normal equations: ~2e-14 here
+    # rotate both eigenbases by random orthogonal R: the operators become Rᵀ Λ R (full), the map RₜᵀCRₛ
+    rng = np.random.default_rng(11)
+    Rs = np.linalg.qr(rng.standard_normal((K, K)))[0]
+    Rt = np.linalg.qr(rng.standard_normal((K - 2, K - 2)))[0]
+    Ss, Tt = Rs.T @ np.diag(d["lam"]) @ Rs, Rt.T @ np.diag(d["lam_n"]) @ Rt
+    assert np.linalg.norm(Ss - np.diag(np.diag(Ss))) > 0.1 * np.linalg.norm(Ss)
+    Crot = fmaps.functional_map(d["Phi"] @ Rs, d["Phi_n"] @ Rt, *args[2:], op_src=Ss, op_tgt=Tt, commutativity=w)
+    np.testing.assert_allclose(Crot, Rt.T @ C @ Rs, atol=1e-10)
+
+
+def test_basis_operator_of_eigenbasis_is_diag_evals(noisy):
+    d = noisy
+    S = fmaps.basis_operator(d["Phi"], d["lap"].W)
+    T = fmaps.basis_operator(d["Phi_n"], d["lap_n"].W.toarray())  # dense W too
+    np.testing.assert_array_equal(S, S.T)
+    np.testing.assert_allclose(S, np.diag(d["lam"]), atol=1e-9 * d["lam"][-1])
+    np.testing.assert_allclose(T, np.diag(d["lam_n"]), atol=1e-9 * d["lam_n"][-1])
+    args = (d["Phi"], d["Phi_n"], d["F"], d["Fn"], d["lap"].A, d["lap_n"].A)
+    C = fmaps.functional_map(*args, evals_src=d["lam"], evals_tgt=d["lam_n"], commutativity=3e-4)
+    Cop = fmaps.functional_map(*args, op_src=S, op_tgt=T, commutativity=3e-4)  # full (rounding) → eigh route
+    np.testing.assert_allclose(Cop, C, atol=1e-8)
+
+
+@functools.lru_cache(maxsize=None)
+def _lmh_bases():
+    """[Φ_6, 6 LMHs localised at the first bump] on both meshes of the noisy pair, A-orthonormalised (§3.1.1)."""
+    from objectives import bases
+    d = _noisy_pair()
+    out = []
+    for lap, Phi, F in ((d["lap"], d["Phi"], d["F"]), (d["lap_n"], d["Phi_n"], d["Fn"])):
+        u = F[:, 0] / F[:, 0].max()
+        lm = bases.lmh(lap.W, lap.A, 6, Phi[:, :6], mu_perp=1e3, v=(1 - u) ** 2, mu_R=1e2)
+        X = bases.concatenate(Phi[:, :6], lm.Psi, lap.A)[0]
+        L = np.linalg.cholesky(X.T @ (lap.A @ X))
+        out.append(np.linalg.solve(L, X.T).T)  # X L⁻ᵀ: A-orthonormal, same span
+    return tuple(out)
+
+
+def test_lmh_basis_full_commutativity_beats_diagonal_approximation(noisy):
+    d = noisy
+    Xs, Xt = _lmh_bases()
+    np.testing.assert_allclose(Xs.T @ (d["lap"].A @ Xs), np.eye(12), atol=1e-10)
+    S, T = fmaps.basis_operator(Xs, d["lap"].W), fmaps.basis_operator(Xt, d["lap_n"].W)
+    assert np.linalg.norm(S - np.diag(np.diag(S))) > 0.05 * np.linalg.norm(S)  # genuinely non-diagonal
+    args = (Xs, Xt, d["F"], d["Fn"], d["lap"].A, d["lap_n"].A)
+    a = fmaps.function_coefficients(Xs, d["F"], d["lap"].A)
+    b = fmaps.function_coefficients(Xt, d["Fn"], d["lap_n"].A)
+    for w in (1e-3, 1e-2):
+        C_full = fmaps.functional_map(*args, op_src=S, op_tgt=T, commutativity=w)
+        C_diag = fmaps.functional_map(*args, evals_src=np.diag(S), evals_tgt=np.diag(T), commutativity=w)
+        res_full, res_diag = (np.linalg.norm(T @ C - C @ S) for C in (C_full, C_diag))
+        assert res_full < 0.7 * res_diag
+        J = [np.linalg.norm(C @ a - b) ** 2 + w * np.linalg.norm(T @ C - C @ S) ** 2 for C in (C_full, C_diag)]
+        assert J[0] < J[1]  # C_full minimises the true objective
+        C_kr = fmaps.functional_map(*args, op_src=S, op_tgt=T, commutativity=w, op_solver="kronecker")
+        np.testing.assert_allclose(C_full, C_kr, atol=1e-9)
+
+
+def test_full_operator_bad_input(noisy, monkeypatch):
+    d = noisy
+    args = (d["Phi"], d["Phi_n"], d["F"], d["Fn"], d["lap"].A, d["lap_n"].A)
+    S, T = np.diag(d["lam"]), np.diag(d["lam_n"])
+    err = fmaps.FmapCommutativityError
+    assert issubclass(err, ValueError)
+    with pytest.raises(err, match="not both"):
+        fmaps.functional_map(*args, evals_src=d["lam"], evals_tgt=d["lam_n"], op_src=S, op_tgt=T, commutativity=1.0)
+    with pytest.raises(err, match="not both"):  # also when the weight is zero
+        fmaps.functional_map(*args, evals_src=d["lam"], op_tgt=T)
+    with pytest.raises(err, match="both op_src"):
+        fmaps.functional_map(*args, op_src=S, commutativity=1.0)
+    with pytest.raises(fmaps.FmapShapeError, match=r"op_tgt has shape \(10, 9\).*square"):
+        fmaps.functional_map(*args, op_src=S, op_tgt=T[:, :-1], commutativity=1.0)
+    with pytest.raises(fmaps.FmapShapeError, match=r"op_src has shape \(11, 11\); expected \(k_src, k_src\)"):
+        fmaps.functional_map(*args, op_src=S[1:, 1:], op_tgt=T, commutativity=1.0)
+    S_nan = S.copy()
+    S_nan[2, 3] = np.nan
+    with pytest.raises(err, match="source operator has 1 non-finite"):
+        fmaps.functional_map(*args, op_src=S_nan, op_tgt=T)  # checked even at zero weight
+    T_ns = T.copy()
+    T_ns[0, 1] = 1.0
+    with pytest.raises(err, match="op_tgt is not symmetric.*op_solver='kronecker'"):
+        fmaps.functional_map(*args, op_src=S, op_tgt=T_ns, commutativity=1.0, op_solver="eigh")
+    for bad_w in (-1e-3, np.nan, np.inf):
+        with pytest.raises(err, match="finite and ≥ 0"):
+            fmaps.functional_map(*args, op_src=S, op_tgt=T, commutativity=bad_w)
+    with pytest.raises(ValueError, match="unknown op_solver"):
+        fmaps.functional_map(*args, op_src=S, op_tgt=T, commutativity=1.0, op_solver="lu")
+    monkeypatch.setattr(fmaps, "KRONECKER_MAX_UNKNOWNS", 100)
+    with pytest.raises(err, match="120 > KRONECKER_MAX_UNKNOWNS = 100"):
+        fmaps.functional_map(*args, op_src=S, op_tgt=T_ns, commutativity=1.0)
+    # basis_operator
+    with pytest.raises(fmaps.FmapShapeError, match=r"W has shape \(501, 501\)"):
+        fmaps.basis_operator(d["Phi"], d["lap"].W[:-1, :-1])
+    with pytest.raises(fmaps.FmapShapeError, match="Psi must be"):
+        fmaps.basis_operator(d["Phi"][:, 0], d["lap"].W)
+    L = (d["lap"].W.T / d["lap"].A.diagonal()).T  # A⁻¹W, not symmetric
+    with pytest.raises(err, match="not the Laplacian"):
+        fmaps.basis_operator(d["Phi"], L)
+    with pytest.raises(err, match="non-finite"):
+        fmaps.basis_operator(np.full_like(d["Phi"], np.nan), d["lap"].W)
