@@ -91,12 +91,13 @@ def _block_rounds(F, manifold, X, P, *, gtol: float, ftol: float, max_iters: int
     return X, done, status, wall, compile_t, {key: np.concatenate(v) for key, v in parts.items()}
 
 
-def _staged(progress, offset: int, elapsed: float, stage: int, n_stages: int):
+def _staged(progress, offset: int, elapsed: float, stage: int, n_stages: int, final: bool = True):
     """``progress`` with a stage's reports shifted to the whole solve: iterations and seconds of the earlier
-    stages added, the stage and the number of stages set."""
+    stages added, the stage and the number of stages set; ``final``: this run may end the solve (the last
+    stage's run to ``ftol``, not its stop for a saddle check)."""
 
     def report(info):
-        if stage < n_stages - 1 and info.remaining == 0.0:  # the end of an intermediate stage is not the end
+        if (stage < n_stages - 1 or not final) and info.remaining == 0.0:  # an intermediate end is not the end
             info = info._replace(remaining=None)
         progress(info._replace(iteration=offset + info.iteration, elapsed=elapsed + info.elapsed, stage=stage,
                                n_stages=n_stages, method="block"))
@@ -299,7 +300,7 @@ class BlockCMM(_SmoothedSolver):
                     stop = dict(ftol=max(self.ftol, self.stage_ftol), ftol_window=self.stage_window)
                 else:
                     stop = dict(ftol=self.ftol if tight else max(self.ftol, self.saddle_ftol))
-                report = None if progress is None else _staged(progress, iters, wall, stage, len(schedule))
+                report = None if progress is None else _staged(progress, iters, wall, stage, len(schedule), tight)
                 X, it_stage, st, t_run, t_compile, h = _block_rounds(
                     F, manifold, X, P if P is not None else active, gtol=self.gtol, max_iters=self.max_iters,
                     budget=self.max_iters - iters, refresh=self.refresh, optimizer=self.optimizer,
