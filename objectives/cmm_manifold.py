@@ -222,7 +222,7 @@ class BlockCMM(_SmoothedSolver):
       cache; the padded rows stay exactly zero. None: exact shapes. Only with the shifted preconditioner.
     saddle_checks: at most this many saddle checks in the last stage (0: none; ``objectives.cmm_saddle``):
       while the stage has not passed one it stops at the looser relative decrease ``saddle_ftol``, measures
-      the Hessian's most negative curvature θ (30 LOBPCG products) and, when θ < −``saddle_tol``·σ (σ the
+      the Hessian's most negative curvature θ (20 LOBPCG products) and, when θ < −``saddle_tol``·σ (σ the
       preconditioner's shift, λ_{k−1} by default), steps off along it and resumes; a passed check moves
       the stage on to ``ftol``, where one more check is made. The result
       records each (θ, step, decrease, iteration) in ``params["saddles"]``. Measured on example:bumpy (k = 10, μ = 2λ₉): the
