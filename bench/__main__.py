@@ -35,6 +35,7 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
     "second-order": ("bench.second_order", "trust regions vs CG / L-BFGS / pymanopt: Brockett and CMM final stages (issue 22)"),
     "finish": ("bench.finish", "exact-support finish: block / ADMM with and without it, exact zeros, ℓ1 residual (issue 18)"),
     "thesis": ("bench.thesis.report", "the thesis reproduced claim by claim -> docs/THESIS.md (issue 20; --quick)"),
+    "admm-rho": ("bench.admm_rho", "ADMM's penalty rho: increase-only vs two-way balancing, both variants, full and fast; per-step ms"),
     "saddle": ("bench.saddle", "saddle checks: block with and without them against ADMM, θ of each check (issue 18)"),
     "peers": ("bench.peers", "per-iteration cost of Riemannian CG: ours (each retraction) vs pymanopt (issue 18)"),
     "render-cost": ("bench.render_cost", "PNG contact sheet: former vs current renderer, seconds per sheet (k = 10)"),

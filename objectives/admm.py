@@ -15,8 +15,10 @@ The E-step matrix is factored once per value of ρ (sparse LU in symmetric mode;
 factorisations are cached while ρ adapts). Stopping and ρ adaptation follow
 Boyd et al. §3.3–3.4 (thesis §2.4.2): primal residual ``r = ‖[Ψ−E; Ψ−S]‖``, dual
 residual ``s = ρ‖(E−E⁻) + (S−S⁻)‖`` (Boyd's ``ρAᵀB(z−z⁻)`` for the constraint
-``[I; I]Ψ = [E; S]``; both in the penalty norm); ρ is doubled when
-``r > 10 s`` and halved when ``s > 10 r`` (duals rescaled).
+``[I; I]Ψ = [E; S]``; both in the penalty norm); ρ starts at ``options.rho`` or
+``objectives.admm_rho.default_rho`` (``max(μ, 1)``, divided by n in the thesis variant:
+same scale as the exact one) and adapts by ``objectives.admm_rho.RhoRule`` (duals rescaled).
+The result's ``step_times`` are the cumulative seconds of each step (thesis Table 7.2).
 
 This runs on the host (numpy/scipy): each iteration is one sparse solve with k
 right-hand sides plus O(nk) work; the history records the true (non-smooth)
@@ -31,26 +33,31 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
+from stiefel.errors import ParameterError
 from stiefel.sparse_factor import SymmetricFactor
 from stiefel.driver import HostMonitor
 from stiefel.validation import check_count, check_nonnegative, check_number, check_positive
+
+from .admm_rho import RhoRule, StepClock, check_rule, check_variant, default_rho
 
 __all__ = ["ADMMOptions", "ADMMResult", "admm", "admm_sequential", "l1_weights_np", "RhoRule", "soft_threshold"]
 
 
 @dataclasses.dataclass(frozen=True)
 class ADMMOptions:
-    """Options of ``admm`` / ``admm_sequential``.
+    """Options of ``admm`` / ``admm_sequential`` / ``objectives.fast.restricted_admm``.
 
-    rho: initial penalty (None: ``max(μ, 1)``); adapt_rho: Boyd's residual balancing
-    (factor ``rho_tau`` when one residual exceeds ``rho_ratio`` times the other, at most
-    every ``adapt_every`` iterations): ``"increase"`` (default) only ever raises ρ —
-    on this nonconvex problem lowering ρ on a large dual residual (typical while a
-    random start smooths out) drove ρ so low that the iteration diverged —,
-    ``True``/``"both"`` balances both ways, ``False`` keeps ρ fixed; eps_abs, eps_rel: stopping tolerances;
-    max_iters: the total number of iterations of a call (``admm_sequential``: shared fairly by the modes),
-    an integer in ``[1, 2³¹ − 1]``; variant: ``"exact"`` or ``"thesis"``. Checked on construction
-    (``stiefel.ParameterError``).
+    rho: initial penalty (None: ``objectives.admm_rho.default_rho`` — ``max(μ, 1)`` on the A-norm scale, divided
+    by n for the thesis variants, whose Frobenius penalty is n times the A-norm one when A = I/n); adapt_rho:
+    Boyd's residual balancing (factor ``rho_tau`` > 1 when one residual exceeds ``rho_ratio`` > 1 times the
+    other, checked every ``adapt_every`` iterations; ``objectives.admm_rho.RhoRule``): ``"increase"``
+    (default) only ever raises ρ, ``True``/``"both"`` also lowers it when the dual residual dominates both
+    raw and relative to Boyd's tolerance scales (recovers from a too-stiff ρ₀; on meshes where ρ₀ is
+    right it reaches the same objectives but converges less often: ``bench/RESULTS_admm_rho.md``),
+    ``False`` keeps ρ fixed; eps_abs, eps_rel: stopping
+    tolerances; max_iters: the total number of iterations of a call (``admm_sequential``: shared fairly by the
+    modes), an integer in ``[1, 2³¹ − 1]``; variant: ``"exact"`` or ``"thesis"``; time_limit (s). Checked on
+    construction (``stiefel.ParameterError``).
     """
 
     rho: float | None = None
@@ -67,13 +74,19 @@ class ADMMOptions:
     def __post_init__(self) -> None:
         if self.rho is not None:
             check_positive("rho", self.rho)
-        check_number("rho_ratio", self.rho_ratio, low=1)
+        check_rule(self.adapt_rho)
+        check_number("rho_ratio", self.rho_ratio, low=1, low_open=True)
         check_number("rho_tau", self.rho_tau, low=1, low_open=True)
         check_count("adapt_every", self.adapt_every)
         check_nonnegative("eps_abs", self.eps_abs)
         check_nonnegative("eps_rel", self.eps_rel)
         check_count("max_iters", self.max_iters)
+        check_variant(self.variant)
         check_positive("time_limit", self.time_limit, finite=False)
+
+    def initial_rho(self, mu: float, n: int) -> float:
+        """ρ₀: ``rho`` when given, else ``default_rho(variant, μ, n)``."""
+        return float(self.rho) if self.rho is not None else default_rho(self.variant, mu, n)
 
 
 @dataclasses.dataclass
@@ -81,7 +94,10 @@ class ADMMResult:
     """Outcome of ADMM: modes ``Psi (n, k)`` (A-orthonormal), true objective, and per-iteration history.
 
     history: dict of arrays ``objective``, ``primal``, ``dual``, ``rho``, ``time`` (seconds since start).
-    status: ``"converged"``, ``"max_iters"`` or ``"time_limit"``.
+    status: ``"converged"``, ``"max_iters"``, ``"time_limit"``, ``"target"`` or ``"interrupted"``.
+    rho0: the initial penalty; step_times: cumulative seconds per step (``objectives.admm_rho.STEPS``: ``psi``
+    (Ψ-/X-step), ``E``, ``S``, ``dual`` (dual and ρ updates), ``residual``, ``objective`` (the history's true
+    objective)), their sum ≤ ``wall_time`` (thesis Table 7.2 reports them per iteration).
     """
 
     Psi: np.ndarray
@@ -92,46 +108,8 @@ class ADMMResult:
     wall_time: float
     factor_time: float
     n_factorizations: int
-
-
-class RhoRule:
-    """ρ adaptation: residual balancing (Boyd et al. §3.4.1) plus a stagnation guard.
-
-    ``update(it, primal, dual)`` returns the factor to multiply ρ by (scaled duals divide by
-    it). Besides balancing, ρ is raised when the primal residual has not improved by 1% over
-    ``stall_checks`` consecutive checks: on this nonconvex problem a too-small ρ lets the copies
-    E, S drift from Ψ while both residuals stay within a factor 10 of each other (fandisk,
-    camelhead and armadillo diverged at ρ = 3λ_k without it).
-    """
-
-    def __init__(self, options: ADMMOptions, stall_checks: int = 10):
-        self.options = options
-        self.best = np.inf
-        self.stalled = 0
-        self.stall_checks = stall_checks
-
-    def update(self, it: int, primal: float, dual: float) -> float:
-        opt = self.options
-        if not opt.adapt_rho or it % opt.adapt_every:
-            return 1.0
-        if primal < 0.99 * self.best:
-            self.best, self.stalled = primal, 0
-        else:
-            self.stalled += 1
-        if primal > opt.rho_ratio * dual or self.stalled >= self.stall_checks:
-            self.best, self.stalled = np.inf, 0
-            return opt.rho_tau
-        if opt.adapt_rho != "increase" and dual > opt.rho_ratio * primal:
-            return 1.0 / opt.rho_tau
-        return 1.0
-
-    def apply(self, it: int, primal: float, dual: float, rho: float, *duals: np.ndarray) -> float:
-        """Return the new ρ; the scaled duals are rescaled in place."""
-        factor = self.update(it, primal, dual)
-        if factor != 1.0:
-            for u in duals:
-                u /= factor
-        return rho * factor
+    rho0: float = float("nan")
+    step_times: dict = dataclasses.field(default_factory=dict)
 
 
 def l1_weights_np(area_diag: np.ndarray, weighting: str) -> np.ndarray:
@@ -232,9 +210,7 @@ def admm(W, area_diag, k: int, mu: float, *, weighting: str = "area", Psi0=None,
     check_count("k", k, 1, n, high_label=f"n = {n}")
     check_nonnegative("mu", mu)
     w = l1_weights_np(a, weighting)
-    exact = options.variant == "exact"
-    if options.variant not in ("exact", "thesis"):
-        raise ValueError(f"unknown ADMM variant {options.variant!r}")
+    exact = check_variant(options.variant) == "exact"
     d = a if exact else np.ones(n)  # the penalty metric
     r_scale = 1.0 / n  # the thesis's A ≈ rI
     if Psi0 is None:
@@ -242,38 +218,46 @@ def admm(W, area_diag, k: int, mu: float, *, weighting: str = "area", Psi0=None,
     Psi = orthonormalize(np.asarray(Psi0, dtype=np.float64), a)
     E, S = Psi.copy(), Psi.copy()
     UE, US = np.zeros_like(Psi), np.zeros_like(Psi)
-    rho = float(options.rho if options.rho is not None else max(mu, 1.0))
+    rho = rho0 = options.initial_rho(mu, n)
     estep = _EStep(W, d)
     thresh_w = w / d  # shrink S at μ w_i / (ρ d_i)
     sqrt_d = np.sqrt(d)[:, None]
+    dcol = d[:, None]
     status = "max_iters"
-    rule = RhoRule(options)
+    rule = RhoRule(options, n)
+    clock = StepClock()
     t0 = time.perf_counter()
     hist = _History(t0)
     it = 0
     try:
         for it in range(1, options.max_iters + 1):
+            clock.mark()
             Y = 0.5 * (E - UE + S - US)
             if exact:
                 Psi = _polar(sqrt_d * Y) / sqrt_d
             else:
                 Psi = _polar(Y) / np.sqrt(r_scale)
+            clock.lap("psi")
             E_old, S_old = E, S
-            E = estep.solve(rho, rho * (d[:, None] * (Psi + UE)))
-            V = Psi + US
-            S = soft_threshold(V, mu * thresh_w[:, None] / rho)
+            E = estep.solve(rho, rho * (dcol * (Psi + UE)))
+            clock.lap("E")
+            S = soft_threshold(Psi + US, mu * thresh_w[:, None] / rho)
+            clock.lap("S")
             UE += Psi - E
             US += Psi - S
-            # residuals in the penalty norm
-            primal = np.sqrt(np.sum(d[:, None] * ((Psi - E) ** 2 + (Psi - S) ** 2)))
-            dual = rho * np.sqrt(np.sum(d[:, None] * (E - E_old + S - S_old) ** 2))
+            clock.lap("dual")
+            # residuals in the penalty norm, and the scales of Boyd's relative tolerances
+            primal = np.sqrt(np.sum(dcol * ((Psi - E) ** 2 + (Psi - S) ** 2)))
+            dual = rho * np.sqrt(np.sum(dcol * (E - E_old + S - S_old) ** 2))
+            primal_scale = max(np.sqrt(np.sum(dcol * Psi**2)) * np.sqrt(2), np.sqrt(np.sum(dcol * (E**2 + S**2))))
+            dual_scale = rho * np.sqrt(np.sum(dcol * (UE + US) ** 2))
+            eps_pri = np.sqrt(2 * n * k) * options.eps_abs + options.eps_rel * primal_scale
+            eps_dual = np.sqrt(n * k) * options.eps_abs + options.eps_rel * dual_scale
+            clock.lap("residual")
             Psi_feasible = Psi if exact else orthonormalize(Psi, a)
             obj = _true_objective(W, w, mu, Psi_feasible)
             elapsed = hist.record(objective=obj, primal=primal, dual=dual, rho=rho)
-            scale_p = np.sqrt(2 * n * k) * options.eps_abs
-            eps_pri = scale_p + options.eps_rel * max(np.sqrt(np.sum(d[:, None] * Psi**2)) * np.sqrt(2),
-                                                      np.sqrt(np.sum(d[:, None] * (E**2 + S**2))))
-            eps_dual = np.sqrt(n * k) * options.eps_abs + options.eps_rel * rho * np.sqrt(np.sum(d[:, None] * (UE + US) ** 2))
+            clock.lap("objective")
             if primal <= eps_pri and dual <= eps_dual:
                 status = "converged"
                 break
@@ -286,7 +270,10 @@ def admm(W, area_diag, k: int, mu: float, *, weighting: str = "area", Psi0=None,
             if monitor is not None and monitor.tick(it, obj, primal, error_result=Psi):
                 status = "interrupted"
                 break
-            rho = rule.apply(it, primal, dual, rho, UE, US)
+            clock.mark()
+            rho = rule.apply(it, primal, dual, rho, UE, US, primal_scale=primal_scale, dual_scale=dual_scale,
+                                  primal_tol=eps_pri)
+            clock.lap("dual")
     except KeyboardInterrupt:  # Ctrl-C: the current iterate, status interrupted
         status = "interrupted"
     wall = time.perf_counter() - t0
@@ -294,7 +281,7 @@ def admm(W, area_diag, k: int, mu: float, *, weighting: str = "area", Psi0=None,
     return ADMMResult(
         Psi=Psi_out, objective=_true_objective(W, w, mu, Psi_out), iterations=it, status=status,
         history=hist.arrays(), wall_time=wall,
-        factor_time=estep.factor_time, n_factorizations=estep.count,
+        factor_time=estep.factor_time, n_factorizations=estep.count, rho0=rho0, step_times=clock.totals,
     )
 
 
@@ -315,11 +302,13 @@ def admm_sequential(W, area_diag, k: int, mu: float, *, weighting: str = "area",
     check_count("k", k, 1, n, high_label=f"n = {n}")
     check_nonnegative("mu", mu)
     w = l1_weights_np(a, weighting)
-    if options.variant != "exact":
-        raise ValueError("sequential ADMM is implemented in the exact (A-weighted) form only")
+    if check_variant(options.variant) != "exact":
+        raise ParameterError("sequential ADMM is implemented in the exact (A-weighted) form only")
     rng = np.random.default_rng(seed)
     Phi = np.zeros((n, 0))
     estep = _EStep(W, a)
+    rho0 = options.initial_rho(mu, n)
+    clock = StepClock()
     t0 = time.perf_counter()
     hist = _History(t0)
     total_it = 0
@@ -335,35 +324,47 @@ def admm_sequential(W, area_diag, k: int, mu: float, *, weighting: str = "area",
             psi = project(y0)
             e, s = psi.copy(), psi.copy()
             ue, us = np.zeros(n), np.zeros(n)
-            rho = float(options.rho if options.rho is not None else max(mu, 1.0))
+            rho = rho0
             col_status = "max_iters"
-            rule = RhoRule(options)
+            rule = RhoRule(options, n)
             it = 0
             share = -(-(options.max_iters - total_it) // (k - j))  # ⌈left / modes to go⌉
             for it in range(1, share + 1):
+                clock.mark()
                 psi = project(0.5 * (e - ue + s - us))
+                clock.lap("psi")
                 e_old, s_old = e, s
                 e = estep.solve(rho, rho * a * (psi + ue))
-                v = psi + us
-                s = soft_threshold(v, mu * w / (a * rho))
+                clock.lap("E")
+                s = soft_threshold(psi + us, mu * w / (a * rho))
+                clock.lap("S")
                 ue += psi - e
                 us += psi - s
+                clock.lap("dual")
                 primal = np.sqrt(np.sum(a * ((psi - e) ** 2 + (psi - s) ** 2)))
                 dual = rho * np.sqrt(np.sum(a * (e - e_old + s - s_old) ** 2))
+                primal_scale = max(np.sqrt(2.0), np.sqrt(np.sum(a * (e**2 + s**2))))
+                dual_scale = rho * np.sqrt(np.sum(a * (ue + us) ** 2))
                 eps_pri = np.sqrt(2 * n) * options.eps_abs + options.eps_rel * np.sqrt(2.0)
-                eps_dual = np.sqrt(n) * options.eps_abs + options.eps_rel * rho * np.sqrt(np.sum(a * (ue + us) ** 2))
+                eps_dual = np.sqrt(n) * options.eps_abs + options.eps_rel * dual_scale
+                clock.lap("residual")
                 if primal <= eps_pri and dual <= eps_dual:
                     col_status = "converged"
                     break
                 if monitor is not None and monitor.tick(total_it + it, float("nan"), primal, error_result=Phi):
                     col_status = "interrupted"
                     break
-                rho = rule.apply(it, primal, dual, rho, ue, us)
+                clock.mark()
+                rho = rule.apply(it, primal, dual, rho, ue, us, primal_scale=primal_scale, dual_scale=dual_scale,
+                                 primal_tol=eps_pri)
+                clock.lap("dual")
             total_it += it
             if col_status != "converged":
                 status = col_status
             Phi = np.concatenate([Phi, psi[:, None]], axis=1)
+            clock.mark()
             hist.record(objective=_true_objective(W, w, mu, Phi))
+            clock.lap("objective")
             if col_status == "interrupted":
                 break
     except KeyboardInterrupt:  # Ctrl-C: the current iterate, status interrupted
@@ -376,5 +377,5 @@ def admm_sequential(W, area_diag, k: int, mu: float, *, weighting: str = "area",
     return ADMMResult(
         Psi=Psi_out, objective=_true_objective(W, w, mu, Psi_out), iterations=total_it, status=status,
         history=hist.arrays(), wall_time=time.perf_counter() - t0,
-        factor_time=estep.factor_time, n_factorizations=estep.count,
+        factor_time=estep.factor_time, n_factorizations=estep.count, rho0=rho0, step_times=clock.totals,
     )

@@ -65,7 +65,8 @@ class CMMResult:
     orthogonality: ``max|ΨᵀAΨ − I|``.
     iterations, wall_time (s, compile excluded; includes the preconditioner's and ADMM's
       factorisations), compile_time, status, method, params (the arguments; for the ADMM
-      methods also ``rho0``, the initial penalty used).
+      methods also ``rho0``, the initial penalty used, and ``step_times``, seconds per step — Ψ/X, E, S,
+      dual, residual, objective; for ``BlockCMM`` ``saddles``, its saddle checks, when it made any).
     history: objective trace ``{"time": (T,), "objective": (T,)}`` where available.
     exact_zeros: fraction of entries exactly 0; support_sizes / support_areas: per mode, the number of
       nonzero entries and their share of the total area (``objectives.l1_optimality.support_stats``).

@@ -1,5 +1,8 @@
 """The ADMM CMM solvers (thesis Algorithms 3 and 8; docs/maths.md §5–6): ``ADMMCMM`` (exact or thesis form),
-``SequentialADMMCMM`` and ``FastCMM`` (restricted to local functions). Host numpy/scipy, float64."""
+``SequentialADMMCMM`` and ``FastCMM`` (restricted to local functions; exact or printed form). Host numpy/scipy,
+float64. Each run reports ``info`` → ``CMMResult.params``: ``rho0`` (the initial penalty) and ``step_times``
+(cumulative seconds of the Ψ/X-, E-, S-steps, dual/ρ updates, residuals and the recorded objective;
+``objectives.admm_rho.STEPS``)."""
 
 from __future__ import annotations
 
@@ -12,19 +15,20 @@ import scipy.sparse as sp
 from stiefel.driver import HostMonitor
 
 from .admm import ADMMOptions, ADMMResult, admm, admm_sequential
-from .cmm_base import CMMSolver, SolverRun, _check_int, _check_number, _is_number, _no_callback, _require
+from .admm_rho import RULES, VARIANTS, check_rule, check_variant, penalty_scale
+from .cmm_base import (CMMSolver, SolverOptionError, SolverRun, _check_int, _check_number, _is_number, _no_callback,
+                       _require)
 from .fast import restricted_admm, restricted_eigenbasis
 
-__all__ = ["ADMMCMM", "SequentialADMMCMM", "FastCMM", "VARIANTS"]
-
-VARIANTS = ("exact", "thesis")
+__all__ = ["ADMMCMM", "SequentialADMMCMM", "FastCMM", "VARIANTS", "RULES"]
 
 
 def _solver_run(res: ADMMResult, opts: ADMMOptions, mu: float) -> SolverRun:
-    """The ``SolverRun`` of an ADMM result: history ``time``/``objective``, ``info["rho0"]`` (the ρ it began with)."""
+    """The ``SolverRun`` of an ADMM result: history ``time``/``objective``; ``info["rho0"]`` (the ρ it began
+    with) and ``info["step_times"]`` (seconds per step, ``ADMMResult.step_times``)."""
     history = {"time": res.history["time"], "objective": res.history["objective"]}
-    rho0 = float(opts.rho if opts.rho is not None else max(mu, 1.0))  # admm's own default
-    return SolverRun(res.Psi, res.iterations, res.status, res.wall_time, 0.0, history, {"rho0": rho0})
+    info = {"rho0": float(res.rho0), "step_times": {key: float(t) for key, t in res.step_times.items()}}
+    return SolverRun(res.Psi, res.iterations, res.status, res.wall_time, 0.0, history, info)
 
 
 def _finish(res: ADMMResult, opts: ADMMOptions, mu: float, monitor: HostMonitor | None) -> SolverRun:
@@ -38,9 +42,11 @@ def _finish(res: ADMMResult, opts: ADMMOptions, mu: float, monitor: HostMonitor 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class _ADMMSolver(CMMSolver):
     """``ADMMOptions`` (``objectives.admm``) without the variant: ``rho`` (None: 2λ_{k−1} from the
-    eigenbasis start's eigenvalues — the modes' spectrum; too small a ρ diverges —, else ``max(μ, 1)``),
-    residual balancing ``adapt_rho`` (``"increase"``, ``True``/``"both"``, ``False``) by ``rho_tau`` when
-    one residual exceeds ``rho_ratio`` times the other, at most every ``adapt_every`` iterations;
+    eigenbasis start's eigenvalues — the modes' spectrum; too small a ρ diverges —, else ``max(μ, 1)``; both
+    divided by n for a thesis variant, whose Frobenius penalty is n times the A-norm one when A = I/n),
+    residual balancing ``adapt_rho`` (``"increase"``, ``True``/``"both"``, ``False``; ``objectives.admm_rho.
+    RhoRule``) by ``rho_tau`` > 1 when one residual exceeds ``rho_ratio`` > 1 times the other, every
+    ``adapt_every`` iterations;
     stopping ``eps_abs``, ``eps_rel``, ``time_limit`` (s) and ``max_iters``, the total number of ADMM
     iterations of the solve (an integer in ``[1, 2³¹ − 1]``; ``SequentialADMMCMM``'s modes share it
     fairly). Host numpy/scipy, float64. ``solve(..., progress=, stop=)``: reports (primal residual as
@@ -62,9 +68,8 @@ class _ADMMSolver(CMMSolver):
     def __post_init__(self) -> None:
         _require(self.rho is None or (_is_number(self.rho) and math.isfinite(self.rho) and self.rho > 0),
                  f"rho must be None (automatic) or a positive finite number, got {self.rho!r}")
-        _require(isinstance(self.adapt_rho, bool) or self.adapt_rho in ("increase", "both"),
-                 f"adapt_rho must be 'increase', 'both', True or False, got {self.adapt_rho!r}")
-        _check_number("rho_ratio", self.rho_ratio, 1)
+        check_rule(self.adapt_rho, SolverOptionError)
+        _check_number("rho_ratio", self.rho_ratio, 1, strict=True)
         _check_number("rho_tau", self.rho_tau, 1, strict=True)
         _check_int("adapt_every", self.adapt_every, 1)
         _check_number("eps_abs", self.eps_abs, 0)
@@ -77,9 +82,11 @@ class _ADMMSolver(CMMSolver):
         fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(ADMMOptions) if hasattr(self, f.name)}
         return ADMMOptions(**{**fields, "rho": rho if rho is not None else self.rho})
 
-    def _rho(self, evals, k: int) -> float | None:
+    def _rho(self, evals, k: int, n: int) -> float | None:
+        """``rho``, else 2λ_{k−1} (A-norm scale) times the variant's ``penalty_scale`` when eigenvalues are known."""
         if self.rho is None and evals is not None:
-            return 2.0 * float(evals[k - 1] if k > 1 else evals[1])
+            scale = penalty_scale(getattr(self, "variant", "exact"), n)
+            return 2.0 * float(evals[k - 1] if k > 1 else evals[1]) * scale
         return self.rho
 
     def _monitor(self, progress, stop, opts: ADMMOptions) -> HostMonitor | None:
@@ -89,7 +96,7 @@ class _ADMMSolver(CMMSolver):
 
     def _run(self, run, W, a, k, mu, start, weighting, seed, callback, progress, stop) -> SolverRun:
         _no_callback(self, callback)
-        opts = self.admm_options(self._rho(start.evals, k))
+        opts = self.admm_options(self._rho(start.evals, k, a.shape[0]))
         monitor = self._monitor(progress, stop, opts)
         res = run(W, a, k, mu, weighting=weighting, Psi0=start.X0, seed=seed, options=opts, monitor=monitor)
         return _finish(res, opts, mu, monitor)
@@ -105,7 +112,7 @@ class ADMMCMM(_ADMMSolver):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        _require(self.variant in VARIANTS, f"unknown ADMM variant {self.variant!r}; choose one of {VARIANTS}")
+        check_variant(self.variant, SolverOptionError)
 
     def solve(self, W, a, k, mu, start, *, weighting="area", seed=0, dtype=None, callback=None, progress=None,
               stop=None) -> SolverRun:
@@ -130,17 +137,20 @@ class SequentialADMMCMM(_ADMMSolver):
 @dataclasses.dataclass(frozen=True, eq=False)
 class FastCMM(_ADMMSolver):
     """Algorithm 8 (``objectives.fast.restricted_admm``) on ``span(U)``, ``local_functions``: ``(n, d)``
-    (sparse), e.g. ``mesh.local_functions(m, n_samples=d).U``. Start ``"eigen"``: the restricted
-    eigenbasis (Algorithm 7) with ρ = 2λ̄_{k−1} (its k-th eigenvalue) unless ``rho`` is given;
-    ``"random"``: random coefficients (seed), ρ = ``rho`` or ``max(μ, 1)``. Equal when ``U`` is the
-    same object and the other options are equal."""
+    (sparse), e.g. ``mesh.local_functions(m, n_samples=d).U``; ``variant``: ``"exact"`` (A-norm penalties)
+    or ``"thesis"`` (the printed algorithm: Frobenius penalties, A ≈ I/n; final X Ā-orthonormal either way).
+    Start ``"eigen"``: the restricted eigenbasis (Algorithm 7) with ρ = 2λ̄_{k−1} (its k-th eigenvalue; /n
+    for the thesis variant) unless ``rho`` is given; ``"random"``: random coefficients (seed), ρ = ``rho``
+    or ``max(μ, 1)`` (/n). Equal when ``U`` is the same object and the other options are equal."""
 
     name: ClassVar[str] = "fast"
     restricted: ClassVar[bool] = True
     local_functions: Any
+    variant: str = "exact"
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        check_variant(self.variant, SolverOptionError)
         shape = getattr(self.local_functions, "shape", None)
         _require(shape is not None and len(shape) == 2 and shape[1] >= 1,
                  "local_functions must be an (n, d) matrix with d ≥ 1 (e.g. mesh.local_functions(m, n_samples=d).U), "
@@ -179,7 +189,7 @@ class FastCMM(_ADMMSolver):
             evals_r, _, Xr = restricted_eigenbasis(W, sp.diags_array(a), self.local_functions, max(k, 2))
             Xr = Xr[:, :k]
             if rho is None:  # as for the full ADMM: ρ of the order of the modes' spectrum
-                rho = 2.0 * float(evals_r[k - 1] if k > 1 else evals_r[1])
+                rho = 2.0 * float(evals_r[k - 1] if k > 1 else evals_r[1]) * penalty_scale(self.variant, n)
         opts = self.admm_options(rho)
         monitor = self._monitor(progress, stop, opts)
         res = restricted_admm(W, a, self.local_functions, k, mu, weighting=weighting, X0=Xr, seed=seed, options=opts,
