@@ -21,7 +21,8 @@ The mesh layer knows nothing of optimisation. Public API:
 * Descriptors (§4.1): ``geodesic_distance``, ``geodists``, ``deltas``, ``normdist``,
   ``hks``, ``wks``, ``constant``, ``vertex_positions``, ``extremal_points``,
   ``central_points``, ``landmarks``, ``scaled_to_unit_area``.
-* Sampling (§7.1): ``poisson_disk_sample``, ``local_functions -> LocalFunctions(U, …)``.
+* Sampling (§7.1): ``poisson_disk_sample``, ``local_functions -> LocalFunctions(U, radii, …)``,
+  ``local_distance`` (the Euclidean-corrected Dijkstra distance), ``SamplingError``.
 * Permutations and isometry (Def. 3.4.8): ``permute``, ``reorder`` (reverse
   Cuthill–McKee, opt-in), ``inverse_permutation``, ``permutation_matrix``,
   ``is_isometric``, ``isometry_defect``.
@@ -68,7 +69,7 @@ from .isometry import is_isometric, isometry_defect
 from .laplacian import AREAS, WEIGHTS, Laplacian, area_matrix, laplacian, robust_laplacian
 from .laplacian_jax import laplacian_jax, mass_diagonal_jax, weight_operator_jax
 from .ordering import inverse_permutation, permutation_matrix, permute, reorder
-from .sampling import LocalFunctions, local_functions, poisson_disk_sample
+from .sampling import LocalFunctions, SamplingError, local_distance, local_functions, poisson_disk_sample
 from .segmentation import (
     SegmentMatch,
     SegmentMatchError,
@@ -89,6 +90,7 @@ __all__ = [
     "IndexOutOfRangeError",
     "Laplacian",
     "LocalFunctions",
+    "SamplingError",
     "Mesh",
     "MeshCleaningWarning",
     "MeshError",
@@ -121,6 +123,7 @@ __all__ = [
     "laplacian",
     "laplacian_jax",
     "load",
+    "local_distance",
     "local_functions",
     "mass_diagonal_jax",
     "normdist",
