@@ -10,6 +10,9 @@ the restricted eigenbasis, Algorithm 7):
   and polar retractions, block L-BFGS and Barzilai–Borwein (Cholesky), block CG with the
   active-set preconditioner, and the thesis's sequential solver
   (Algorithm 6, ``compressed_modes(solver=SequentialCMM(...))``);
+* the library's default, ``compressed_modes(solver=BlockCMM())`` (4 continuation stages, saddle checks;
+  ``block-default``), and the same followed by the exact-support finish (``finish=SupportFinish()``: exact
+  zeros on the true ℓ1 problem; ``block-default-finish``);
 * the ADMM baseline (``compressed_modes(solver=ADMMCMM(...))``, ρ₀ = 3λ_k, increase-only);
 * the fast approximation (``compressed_modes(solver=FastCMM(U, ...))``, ``--fast-samples`` local functions);
 * at μ = 0: ``scipy.sparse.linalg.eigsh`` shift-invert (reference) and block CG (Cholesky) from a
@@ -66,13 +69,15 @@ from stiefel.sparse_factor import default_backend  # noqa: E402
 from objectives.admm import orthonormalize  # noqa: E402
 from objectives.cmm import compressed_modes, first_eigenpairs  # noqa: E402
 from objectives.cmm_solvers import ADMMCMM, BlockCMM, FastCMM, SequentialCMM  # noqa: E402
+from objectives.support_finish import SupportFinish  # noqa: E402
 from objectives.energies import cmm_energy  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 BLOCK = {"block-cg-cholesky": ("cg", "cholesky"), "block-cg-cayley": ("cg", "cayley"),
          "block-cg-polar": ("cg", "polar"), "block-lbfgs-cholesky": ("lbfgs", "cholesky"),
          "block-bb-cholesky": ("bb", "cholesky")}
-METHODS = (*BLOCK, "block-cg-active-set", "sequential", "admm", "fast", "eigsh", "block-cg-mu0")
+METHODS = (*BLOCK, "block-default", "block-default-finish", "block-cg-active-set", "sequential", "admm", "fast", "eigsh",
+           "block-cg-mu0")
 MU0 = ("eigsh", "block-cg-mu0")
 REL = 1e-3
 
@@ -167,6 +172,22 @@ def run_block_active_set(pb: Problem) -> dict:
                       preconditioner="active_set", preconditioner_shift=pb.sigma)
     res = compressed_modes((pb.W, pb.lap.A), pb.k, pb.mu, solver=solver, weighting="uniform")
     return _from_cmm(pb, res)
+
+
+def run_block_default(pb: Problem, finish: bool = False) -> dict:
+    """``compressed_modes``'s default ``BlockCMM()`` (4 continuation stages, saddle checks), optionally followed by
+    the exact-support finish (``SupportFinish()``: exact zeros on the true ℓ1 problem); its curve ends at the
+    finished objective after the finish's seconds."""
+    res = compressed_modes((pb.W, pb.lap.A), pb.k, pb.mu, solver=BlockCMM(max_iters=pb.args.max_iters),
+                           weighting="uniform", eigenpairs=(pb.evals, pb.evecs),
+                           finish=SupportFinish() if finish else None)
+    out = _from_cmm(pb, res)
+    if finish:
+        t, v = (np.asarray(c, dtype=float) for c in out["curve"])
+        out["curve"] = (np.r_[t, res.wall_time], np.r_[v, res.objective])
+        out["status"] = f"{res.status}; finish {res.finish['status']}"
+        out["exact_zeros"] = res.exact_zeros
+    return out
 
 
 def run_eigsh(pb: Problem) -> dict:
@@ -288,6 +309,7 @@ def run_suite(args) -> dict:
     mu = args.mu_factor * n
     pb = Problem(m, args.k, mu, args)
     runners = {**{b: (lambda b=b: run_block(pb, b)) for b in BLOCK},
+               "block-default": lambda: run_block_default(pb), "block-default-finish": lambda: run_block_default(pb, True),
                "block-cg-active-set": lambda: run_block_active_set(pb), "sequential": lambda: run_sequential(pb),
                "admm": lambda: run_admm(pb), "fast": lambda: run_fast(pb), "eigsh": lambda: run_eigsh(pb),
                "block-cg-mu0": lambda: run_block_mu0(pb)}
