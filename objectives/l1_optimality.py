@@ -29,24 +29,45 @@ import dataclasses
 import numpy as np
 from jaxtyping import Float
 
-__all__ = ["L1Stationarity", "l1_stationarity", "MaskedGram", "support_stats"]
+__all__ = ["L1Stationarity", "l1_stationarity", "MaskedGram", "support_stats", "DENSE_MAX_ENTRIES"]
+
+
+#: above this many multiplier entries k(k+1)/2 the map is solved matrix-free by CG (the dense inverse costs
+#: O(k⁶) time and O(k⁴) memory: minutes and gigabytes at k = 150)
+DENSE_MAX_ENTRIES = 1000
 
 
 class MaskedGram:
-    """The map ``L_D(Λ) = sym(Φᵀ(D∘(a ⊙ ΦΛ)))`` on symmetric ``(k, k)`` matrices (eq. 9.15), factored.
+    """The map ``L_D(Λ) = sym(Φᵀ(D∘(a ⊙ ΦΛ)))`` on symmetric ``(k, k)`` matrices (eq. 9.15), inverted.
 
     Phi: ``(n, k)``; a: ``(n,)`` the diagonal of A; D: ``(n, k)`` 0/1 mask (None: all ones).
-    ``solve(R)`` returns the symmetric Λ with ``L_D(Λ) = sym(R)``; ``apply(Λ)`` the map itself.
-    Built from the tensor ``T[b] = Φᵀ diag(a∘D_b) Φ`` (k products of ``(k, n)·(n, k)``, O(nk³)).
+    ``solve(R)`` returns the symmetric Λ with ``L_D(Λ) = sym(R)``; ``apply(Λ)`` the map itself. The map is
+    self-adjoint and positive semi-definite in ``⟨Γ, Λ⟩ = tr(ΓΛ)`` (``⟨Γ, L_D(Λ)⟩ = Σ_ij a_i D_ij (ΦΓ)_ij (ΦΛ)_ij``);
+    a pair of columns with disjoint masked supports has an identically zero row and column (its constraint
+    holds for every Λ): the rest is inverted and that multiplier entry is 0. Small k (``k(k+1)/2 ≤
+    DENSE_MAX_ENTRIES``): the dense matrix on the upper entries, built from ``T[b] = Φᵀ diag(a∘D_b) Φ``
+    (O(nk³)) and inverted (pseudo-inverse if singular); larger k: Jacobi-preconditioned CG, O(nk²) a step.
     """
 
     def __init__(self, Phi: Float[np.ndarray, "n k"], a: Float[np.ndarray, " n"], D=None):
         n, k = Phi.shape
-        self.k = k
-        weights = a[:, None] * (np.ones((n, k)) if D is None else D)  # (n, k): column b's weights a∘D_b
-        T = np.stack([Phi.T @ (weights[:, b:b + 1] * Phi) for b in range(k)])  # T[b] (k, k)
+        self.k, self.Phi = k, Phi
+        self.weights = a[:, None] * (np.ones((n, k)) if D is None else D)  # (n, k): column b's weights a∘D_b
         self.iu = np.triu_indices(k)
         m = len(self.iu[0])
+        C = (Phi * Phi).T @ self.weights  # C[b, a] = Σ_i Φ_ib² a_i D_ia
+        # the diagonal of the map in the Frobenius-orthonormal basis of symmetric matrices
+        self.diagonal = 0.5 * (C + C.T)
+        scale = max(float(np.max(np.abs(self.diagonal))), 1e-300)
+        self.live = np.abs(self.diagonal) > 1e-14 * scale
+        self.singular, self.cg_iterations = False, 0
+        self.dense = m <= DENSE_MAX_ENTRIES
+        if self.dense:
+            self._dense_inverse(m)
+
+    def _dense_inverse(self, m: int) -> None:
+        k, Phi, weights = self.k, self.Phi, self.weights
+        T = np.stack([Phi.T @ (weights[:, b:b + 1] * Phi) for b in range(k)])  # T[b] (k, k)
         basis = np.zeros((m, k, k))
         basis[np.arange(m), self.iu[0], self.iu[1]] = 1.0
         basis[np.arange(m), self.iu[1], self.iu[0]] = 1.0
@@ -54,11 +75,7 @@ class MaskedGram:
         half = np.einsum("bac,rcb->rab", T, basis)
         images = 0.5 * (half + np.transpose(half, (0, 2, 1)))
         self.matrix = images[:, self.iu[0], self.iu[1]].T  # (m, m): columns are the images of the basis
-        self.T = T
-        # a pair of columns with disjoint masked supports has an identically zero row and column (its
-        # constraint holds for every Λ): invert the rest, that multiplier entry is 0
-        diag = np.abs(np.diag(self.matrix))
-        live = diag > 1e-14 * max(float(diag.max()), 1e-300)
+        live = self.live[self.iu]
         self._inverse = np.zeros_like(self.matrix)
         block = self.matrix[np.ix_(live, live)]
         try:
@@ -76,14 +93,44 @@ class MaskedGram:
         L[(self.iu[1], self.iu[0])] = vec
         return L
 
-    def solve(self, R: Float[np.ndarray, "k k"]) -> Float[np.ndarray, "k k"]:
-        """Symmetric Λ with ``L_D(Λ) = sym(R)``."""
+    def _map(self, Lam: np.ndarray) -> np.ndarray:
+        Z = self.Phi.T @ (self.weights * (self.Phi @ Lam))
+        return 0.5 * (Z + Z.T)
+
+    def solve(self, R: Float[np.ndarray, "k k"], *, rtol: float = 1e-14, max_iters: int = 1000
+              ) -> Float[np.ndarray, "k k"]:
+        """Symmetric Λ with ``L_D(Λ) = sym(R)`` (on the live entries; the others 0)."""
         S = 0.5 * (R + R.T)
-        return self._to_matrix(self._inverse @ S[self.iu])
+        if self.dense:
+            return self._to_matrix(self._inverse @ S[self.iu])
+        live = self.live
+        b = np.where(live, S, 0.0)
+        inv_diag = np.where(live, 1.0 / np.where(live, self.diagonal, 1.0), 0.0)
+        X = b * inv_diag
+        r = b - np.where(live, self._map(X), 0.0)
+        z = r * inv_diag
+        p, rz = z, float(np.sum(r * z))
+        target = rtol * max(float(np.linalg.norm(b)), 1e-300)
+        for it in range(1, max_iters + 1):
+            if np.linalg.norm(r) <= target or rz <= 0.0:
+                break
+            Ap = np.where(live, self._map(p), 0.0)
+            pAp = float(np.sum(p * Ap))
+            if pAp <= 0.0:
+                break
+            alpha = rz / pAp
+            X, r = X + alpha * p, r - alpha * Ap
+            z = r * inv_diag
+            rz_new = float(np.sum(r * z))
+            p, rz = z + (rz_new / rz) * p, rz_new
+            self.cg_iterations += 1
+        return X
 
     def apply(self, Lam: Float[np.ndarray, "k k"]) -> Float[np.ndarray, "k k"]:
         """``L_D(Λ)`` for symmetric Λ."""
-        return self._to_matrix(self.matrix @ Lam[self.iu])
+        if self.dense:
+            return self._to_matrix(self.matrix @ Lam[self.iu])
+        return self._map(Lam)
 
 
 @dataclasses.dataclass(frozen=True)

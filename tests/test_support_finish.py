@@ -56,6 +56,29 @@ def test_masked_gram_solves_its_map():
     assert np.allclose(gram.apply(Lam), 0.5 * (R + R.T), atol=1e-12)
 
 
+def test_masked_gram_matrix_free_path_matches_the_dense_one(monkeypatch):
+    """Large k solves the map by CG (the dense inverse is O(k⁶)): same Λ, also with a pair of columns whose
+    masked supports are disjoint (a dead multiplier entry, 0 on both paths)."""
+    import objectives.l1_optimality as l1
+
+    rng = np.random.default_rng(5)
+    n, k = 60, 7
+    X = rng.standard_normal((n, k))
+    a = rng.uniform(0.5, 2.0, n)
+    D = (rng.random((n, k)) < 0.6).astype(float)
+    D[:30, 0], D[30:, 1] = 0.0, 0.0  # columns 0 and 1: disjoint masked supports
+    X[30:, 1], X[:30, 0] = 0.0, 0.0
+    R = rng.standard_normal((k, k))
+    dense = MaskedGram(X, a, D)
+    monkeypatch.setattr(l1, "DENSE_MAX_ENTRIES", 0)
+    free = MaskedGram(X, a, D)
+    assert dense.dense and not free.dense and not free.live[0, 1]
+    Lam_d, Lam_f = dense.solve(R), free.solve(R)
+    assert Lam_f[0, 1] == 0.0 and abs(Lam_d[0, 1]) == 0.0
+    assert np.max(np.abs(Lam_f - Lam_d)) <= 1e-12 * np.max(np.abs(Lam_d))
+    assert np.allclose(free.apply(Lam_f), dense.apply(Lam_f), atol=1e-12)
+
+
 def test_stationarity_matches_bounded_least_squares():
     """Eq. (9.16) against scipy's bounded least squares over (Λ upper entries, Z on the zero entries)."""
     W, a, X = _random_problem(n=24, k=2, seed=3)
