@@ -10,8 +10,8 @@ along it (``stiefel.escape_step``); the stage then resumes.
 
 The search is confined to the entries with ``|X_ij| > MASK_FACTOR·max(ε, δ)``: elsewhere the smoothing's
 curvature ``μ w_i s''`` (∝ 1/δ) makes the Hessian too stiff for the ``(W + σA)⁻¹``-preconditioned LOBPCG,
-and no escape direction lives there (measured on bumpy: 20 products reach θ = −79 with the mask (a check costs about 20 iterations),
-80 without it reach only −39).
+and no escape direction lives there (measured on bumpy: 20 products reach θ = −79 with the mask, 80 without
+it only −39). A check costs about as much as 20 iterations.
 """
 
 from __future__ import annotations
@@ -59,6 +59,6 @@ def check(F, manifold, X, P, *, width: float, threshold: float) -> tuple:
         t_compile, t_run = t_compile + c2, t_run + r2
         if bool(step.accepted):
             X_new = step.X
-            record.update(step=float(step.step), decrease=float(F(X) - step.value))
+            record.update(step=float(step.step), decrease=float(step.start_value - step.value))
     record["seconds"] = t_run
     return X_new, record, t_run, t_compile

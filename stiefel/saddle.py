@@ -58,10 +58,12 @@ class Curvature(NamedTuple):
 
 class EscapeStep(NamedTuple):
     """Result of ``escape_step``: ``X`` (the new point, or the old one when no step was accepted),
-    ``value`` (F there), ``step`` (t, 0 when none), ``accepted``, ``trials`` (objective evaluations)."""
+    ``value`` (F there), ``start_value`` (F at the old point), ``step`` (t, 0 when none), ``accepted``,
+    ``trials`` (objective evaluations)."""
 
     X: Float[Array, "n k"]
     value: Float[Array, ""]
+    start_value: Float[Array, ""]
     step: Float[Array, ""]
     accepted: jax.Array
     trials: Int[Array, ""]
@@ -105,10 +107,13 @@ def negative_curvature(fn: Callable, manifold: GeneralizedStiefel, X: Float[Arra
     """
     apply_P = as_preconditioner(preconditioner)
     G, hvp = jax.linearize(jax.grad(_euclidean(fn, args)), X)
-    mask = jnp.ones((X.shape[0], 1), X.dtype) if mask is None else jnp.asarray(mask, X.dtype)
-    mask = mask[:, None] if mask.ndim == 1 else mask
+    if mask is not None:
+        mask = jnp.asarray(mask, X.dtype)
+        mask = mask[:, None] if mask.ndim == 1 else mask
 
     def tangent(Z):  # alternating projections onto {masked} ∩ T_X, ending exactly tangent
+        if mask is None:
+            return manifold.proj(X, Z)
         for _ in range(PROJECTIONS):
             Z = manifold.proj(X, Z * mask)
         return Z
@@ -116,7 +121,7 @@ def negative_curvature(fn: Callable, manifold: GeneralizedStiefel, X: Float[Arra
     def full_hess(Z):
         return manifold.ehess_to_rhess(X, G, hvp(Z), Z)
 
-    def hess(Z):
+    def hess(Z):  # re-projected: keeps the iterates' round-off drift out of the normal space
         return tangent(full_hess(Z))
 
     def inner(Z1, Z2):
@@ -192,5 +197,5 @@ def escape_step(fn: Callable, manifold: GeneralizedStiefel, X: Float[Array, "n k
 
     init = (jnp.asarray(0), jnp.asarray(initial_step, X.dtype), X, f0, jnp.asarray(False))
     j, t, Xt, ft, ok = jax.lax.while_loop(cond, body, init)
-    return EscapeStep(X=jnp.where(ok, Xt, X), value=jnp.where(ok, ft, f0), step=jnp.where(ok, t, 0.0),
-                      accepted=ok, trials=j)
+    return EscapeStep(X=jnp.where(ok, Xt, X), value=jnp.where(ok, ft, f0), start_value=f0,
+                      step=jnp.where(ok, t, 0.0), accepted=ok, trials=j)
