@@ -5,6 +5,8 @@ Public API (docs/maths.md §1–3):
 * ``GeneralizedStiefel(M, k, metric=..., retraction=...)`` — the manifold.
 * ``Grassmann(M, k)`` — the quotient ``S_M/O(k)`` for rotation-invariant objectives; ``sphere(n, M)``,
   ``stiefel(n, k)`` — the named special cases (``stiefel.grassmann``).
+* ``Product(S1, S2, ...)`` — products of those (points are tuples of arrays; ``stiefel.product``): the
+  ``optimistix`` minimisers and the slope checks accept one.
 * ``SequentialConstraint`` — ``{x : ΦᵀMx = 0, xᵀMx = 1}`` for column-by-column solves.
 * ``strong_wolfe``, ``along_curve``, ``LineSearchStatus`` — the line search.
 * ``RiemannianCG``, ``RiemannianLBFGS``, ``RiemannianBB`` — ``optimistix`` minimisers:
@@ -53,6 +55,7 @@ from .block_solver import solve as solve_block
 from .driver import CallbackError, Progress
 from .checks import SlopeCheck, check_gradient, check_hessian, check_retraction
 from .grassmann import Grassmann, sphere, stiefel
+from .product import Product
 from .hessian import hessian_operator, riemannian_hessian
 from .saddle import Curvature, EscapeStep, escape_step, negative_curvature
 from .implicit import RiemannianImplicitAdjoint, riemannian_residual, tangent_solve

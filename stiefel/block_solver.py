@@ -134,6 +134,9 @@ def solve(F: Callable, manifold: GeneralizedStiefel, X0, options: BlockOptions =
 
     ``preconditioner`` must already be a callable ``Y ↦ PY`` (see ``as_preconditioner``).
     """
+    if not isinstance(manifold, GeneralizedStiefel):
+        raise StiefelError("manifold must be a stiefel.GeneralizedStiefel (for a stiefel.Product, call "
+                           "optx.minimise with stiefel.RiemannianCG and friends)")
     solver = solver_for(manifold, options, F=F, preconditioner=preconditioner, monitor=monitor)
     out = _run(_NoArgs(F), solver, X0, None, options.max_iters, adjoint or RiemannianImplicitAdjoint())
     X, value, gnorm, it, status, history, stats = out
@@ -237,7 +240,8 @@ def minimize(
     if method not in METHODS:
         raise StiefelError(f"unknown method {method!r}; choose one of {METHODS}")
     if not isinstance(manifold, GeneralizedStiefel):
-        raise StiefelError("manifold must be a stiefel.GeneralizedStiefel")
+        raise StiefelError("manifold must be a stiefel.GeneralizedStiefel (for a stiefel.Product, call "
+                           "optx.minimise with stiefel.RiemannianCG and friends)")
     c2 = (0.9 if method == "lbfgs" else 0.1) if c2 is None else c2
     _check_options(SimpleNamespace(max_iters=max_iters, ls_max_evals=ls_max_evals, ftol_window=ftol_window,
                                    memory=memory, gtol=gtol, xtol=xtol, ftol=ftol, c1=c1, c2=c2, init_step=init_step,

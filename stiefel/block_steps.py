@@ -2,8 +2,10 @@
 
 Everything here is pure and shared by the three methods (CG, L-BFGS, BB); the solver object
 supplies the options. Directional derivatives are taken as ``tr(RᵀZ)`` with the tangent
-residual ``R = G − MX sym(XᵀG)`` instead of ``tr(GᵀZ)``: equal for tangent ``Z``, but R
-vanishes at critical points while G does not, so slopes keep their relative accuracy.
+residual ``R = G − MX sym(XᵀG)`` (``manifold.tangent_residual``) instead of ``tr(GᵀZ)``: equal
+for tangent ``Z``, but R vanishes at critical points while G does not, so slopes keep their
+relative accuracy. Points and tangent vectors are arrays or, on a ``stiefel.Product``, tuples of
+arrays: the vector algebra goes through ``stiefel.tangent_algebra`` (the same operations for one array).
 """
 
 from __future__ import annotations
@@ -13,8 +15,8 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from . import tangent_algebra as ta
 from .linesearch import along_curve, strong_wolfe
-from .manifold import sym
 from .preconditioning import preconditioned_gradient, preconditioned_residual
 from .result import History, Status
 
@@ -38,7 +40,7 @@ class State(NamedTuple):
     recent: jax.Array  # ring buffer of the last STALL_WINDOW_MAX objective values (ftol test)
     n_fevals: jax.Array
     n_restarts: jax.Array
-    S_mem: jax.Array  # (m, n, k) L-BFGS steps (m = 0 for the other methods)
+    S_mem: jax.Array  # (m, n, k) L-BFGS steps (m = 0 for the other methods); a tuple of them on a Product
     Y_mem: jax.Array  # (m, n, k) L-BFGS gradient differences
     rho_mem: jax.Array  # (m,) 1/⟨s, y⟩
     n_mem: jax.Array  # pairs stored (≤ m); the newest sits at (n_pairs − 1) mod m
@@ -46,8 +48,8 @@ class State(NamedTuple):
     aux: object  # fn's auxiliary output at X
 
 
-def _trace(A, B):
-    return jnp.sum(A * B)
+_trace = ta.inner
+tmap = ta.tmap
 
 
 def _value_and_grad(fn, args):
@@ -60,7 +62,7 @@ def _gradients(solver, X, G):
     S, P = solver.manifold, solver.preconditioner
     rg = S.egrad_to_rgrad(X, G)
     gn = S.norm(X, rg)
-    R = G - S.op.mv(X) @ sym(X.T @ G)
+    R = S.tangent_residual(X, G)
     if P is None or solver.method == "lbfgs":  # L-BFGS applies P inside its two-loop recursion
         xi = rg
     elif solver.precondition == "metric":
@@ -91,19 +93,19 @@ def init_state(solver, fn, X0, args) -> State:
     S = solver.manifold
     (F0, aux0), G0 = _value_and_grad(fn, args)(X0)
     xi0, gn0, R0 = _gradients(solver, X0, G0)
-    dtype = X0.dtype
+    dtype = ta.dtype_of(X0)
     hist = History.empty(max(solver.history, 1), dtype).record(0, F0, gn0, 0.0, _watch(solver, X0))
-    finite0 = jnp.isfinite(F0) & jnp.all(jnp.isfinite(G0))
+    finite0 = jnp.isfinite(F0) & ta.all_finite(G0)
     status0 = jnp.where(~finite0, Status.NON_FINITE, jnp.where(_converged_grad(solver, gn0, F0), Status.CONVERGED, -1))
     status0 = _out_of_budget(solver, jnp.asarray(status0, jnp.int32), 0)
     m = solver.memory_size if solver.method != "lbfgs" else solver.memory
     zero_i = jnp.zeros((), jnp.int32)
     return State(
-        X=X0, F=F0, G=R0, xi=xi0, gnorm=gn0, eta=-xi0,
+        X=X0, F=F0, G=R0, xi=xi0, gnorm=gn0, eta=tmap(jnp.negative, xi0),
         step=jnp.asarray(solver.init_step, dtype) / jnp.maximum(S.norm(X0, xi0), jnp.finfo(dtype).tiny),
         F_prev=F0, C=F0, Q=jnp.ones((), dtype), it=zero_i, status=status0, history=hist,
         recent=jnp.full((STALL_WINDOW_MAX,), F0, dtype), n_fevals=jnp.ones((), jnp.int32), n_restarts=zero_i,
-        S_mem=jnp.zeros((m,) + X0.shape, dtype), Y_mem=jnp.zeros((m,) + X0.shape, dtype),
+        S_mem=ta.stacked_zeros(m, X0, dtype), Y_mem=ta.stacked_zeros(m, X0, dtype),
         rho_mem=jnp.zeros((m,), dtype), n_mem=zero_i, n_pairs=zero_i, aux=aux0,
     )
 
@@ -119,16 +121,16 @@ def _wolfe_search(solver, F, args, c: State, eta, slope, guess, scale):
     S = solver.manifold
     tau0 = jnp.minimum(guess, solver.max_move / S.norm(c.X, eta))
     phi = solver.line(S, c.X, eta, args) if solver.line is not None else None
-    phi = phi if phi is not None else along_curve(F, lambda t: S.retract(c.X, t * eta))
+    phi = phi if phi is not None else along_curve(F, lambda t: S.retract(c.X, tmap(lambda e: t * e, eta)))
     ls = strong_wolfe(phi, c.F, slope, tau0, c1=solver.c1, c2=solver.c2, max_evals=solver.ls_max_evals,
                       value_scale=scale)
-    return S.retract(c.X, ls.step * eta), ls.step, ls.accepted, ls.n_evals
+    return S.retract(c.X, tmap(lambda e: ls.step * e, eta)), ls.step, ls.accepted, ls.n_evals
 
 
 def _precondition_tangent(solver, X, q):
     """The preconditioner as a map of tangent vectors (the L-BFGS initial inverse Hessian)."""
     S, P = solver.manifold, solver.preconditioner
-    Mq = S.op.mv(q)
+    Mq = S.mv(q)
     if solver.precondition == "metric":
         return preconditioned_gradient(S.op, P, X, Mq)
     return preconditioned_residual(S, P, X, Mq)
@@ -137,30 +139,32 @@ def _precondition_tangent(solver, X, q):
 def _lbfgs_direction(solver, c: State):
     """Two-loop recursion: ``−proj_X(H ξ)`` with the stored pairs (newest first, then back)."""
     S = solver.manifold
-    m = c.S_mem.shape[0]
+    m = c.rho_mem.shape[0]
     inner = lambda U, V: S.inner(c.X, U, V)  # noqa: E731
 
     def first(t, state):
         q, alphas = state
         i = (c.n_pairs - 1 - t) % m
-        a = jnp.where(t < c.n_mem, c.rho_mem[i] * inner(c.S_mem[i], q), 0.0)
-        return q - a * c.Y_mem[i], alphas.at[t].set(a)
+        a = jnp.where(t < c.n_mem, c.rho_mem[i] * inner(ta.take(c.S_mem, i), q), 0.0)
+        return tmap(lambda q, y: q - a * y, q, ta.take(c.Y_mem, i)), alphas.at[t].set(a)
 
     q, alphas = jax.lax.fori_loop(0, m, first, (c.xi, jnp.zeros((m,), c.F.dtype)))
     if solver.preconditioner is None:
         newest = (c.n_pairs - 1) % m
-        y = c.Y_mem[newest]
-        r = jnp.where(c.n_mem > 0, 1.0 / (c.rho_mem[newest] * inner(y, y)), 1.0) * q
+        y = ta.take(c.Y_mem, newest)
+        gamma = jnp.where(c.n_mem > 0, 1.0 / (c.rho_mem[newest] * inner(y, y)), 1.0)
+        r = tmap(lambda q: gamma * q, q)
     else:
         r = _precondition_tangent(solver, c.X, q)
 
     def second(t, r):
         tt = m - 1 - t  # oldest stored first
         i = (c.n_pairs - 1 - tt) % m
-        b = c.rho_mem[i] * inner(c.Y_mem[i], r)
-        return r + jnp.where(tt < c.n_mem, alphas[tt] - b, 0.0) * c.S_mem[i]
+        b = c.rho_mem[i] * inner(ta.take(c.Y_mem, i), r)
+        coef = jnp.where(tt < c.n_mem, alphas[tt] - b, 0.0)
+        return tmap(lambda r, s: r + coef * s, r, ta.take(c.S_mem, i))
 
-    return -S.proj(c.X, jax.lax.fori_loop(0, m, second, r))
+    return tmap(jnp.negative, S.proj(c.X, jax.lax.fori_loop(0, m, second, r)))
 
 
 def _direction(solver, c: State):
@@ -168,7 +172,7 @@ def _direction(solver, c: State):
     if solver.method == "cg":
         slope = _trace(c.G, c.eta)
         restart = ~(slope < 0)
-        eta = jnp.where(restart, -c.xi, c.eta)
+        eta = tmap(lambda x, e: jnp.where(restart, -x, e), c.xi, c.eta)
         slope = jnp.where(restart, -_trace(c.G, c.xi), slope)
         return eta, slope, restart, jnp.where(c.it > 0, _interpolated_step(c, slope, c.step), c.step)
     eta = _lbfgs_direction(solver, c)
@@ -177,7 +181,7 @@ def _direction(solver, c: State):
     if solver.preconditioner is not None:  # the preconditioned gradient only when needed (a host solve)
         eta = jax.lax.cond(restart, lambda: -_precondition_tangent(solver, c.X, c.xi), lambda: eta)
     else:
-        eta = jnp.where(restart, -c.xi, eta)
+        eta = tmap(lambda x, e: jnp.where(restart, -x, e), c.xi, eta)
     slope = jnp.where(restart, _trace(c.G, eta), slope)
     # unit step once the memory (or the preconditioner) sets the scale, unless the last decrease
     # predicts a shorter one (with P, unit steps overshot: 3.2 → 1.0 trials per iteration on fandisk)
@@ -188,20 +192,22 @@ def _direction(solver, c: State):
 def _bb_search(solver, F, c: State):
     """Nonmonotone Armijo backtracking along ``−ξ`` from the BB step: ``(X_new, τ, ok, n_evals)``."""
     S = solver.manifold
-    eta = -c.xi
+    eta = tmap(jnp.negative, c.xi)
     slope = -_trace(c.G, c.xi)
     tau0 = jnp.minimum(c.step, solver.max_move / S.norm(c.X, eta))
     armijo = lambda tau, f: jnp.isfinite(f) & (f <= c.C + solver.c1 * tau * slope)  # noqa: E731
 
+    along = lambda t: S.retract(c.X, tmap(lambda e: t * e, eta))  # noqa: E731
+
     def body(s):
         tau, _, n = s
-        return 0.5 * tau, F(S.retract(c.X, 0.5 * tau * eta)), n + 1
+        return 0.5 * tau, F(along(0.5 * tau)), n + 1
 
     cond = lambda s: ~armijo(s[0], s[1]) & (s[2] < solver.ls_max_evals)  # noqa: E731
-    tau, f_acc, n = jax.lax.while_loop(cond, body, (tau0, F(S.retract(c.X, tau0 * eta)), jnp.ones((), jnp.int32)))
+    tau, f_acc, n = jax.lax.while_loop(cond, body, (tau0, F(along(tau0)), jnp.ones((), jnp.int32)))
     ok = armijo(tau, f_acc) & (slope < 0)
     tau = jnp.where(ok, tau, 0.0)
-    return S.retract(c.X, tau * eta), tau, ok, n
+    return along(tau), tau, ok, n
 
 
 def step(solver, fn, args, c: State) -> State:
@@ -209,14 +215,14 @@ def step(solver, fn, args, c: State) -> State:
     S, method = solver.manifold, solver.method
     F = lambda X: fn(X, args)[0]  # noqa: E731
     if method == "bb":
-        eta_used, restart = -c.xi, jnp.zeros((), bool)
+        eta_used, restart = tmap(jnp.negative, c.xi), jnp.zeros((), bool)
         X_new, tau, ok, n_ls = _bb_search(solver, F, c)
     else:
         eta_used, slope, restart, guess = _direction(solver, c)
         X_new, tau, ok, n_ls = _wolfe_search(solver, F, args, c, eta_used, slope, guess, c.history.value[0])
     (F_new, aux_new), G_new = _value_and_grad(fn, args)(X_new)
     xi_new, gn_new, G_new = _gradients(solver, X_new, G_new)
-    finite = jnp.isfinite(F_new) & jnp.all(jnp.isfinite(G_new)) & jnp.all(jnp.isfinite(X_new))
+    finite = jnp.isfinite(F_new) & ta.all_finite(G_new) & ta.all_finite(X_new)
     good = ok & finite
     it = c.it + 1
     conv = _converged_grad(solver, gn_new, F_new)
@@ -233,31 +239,31 @@ def step(solver, fn, args, c: State) -> State:
     eta_next, step_next, C_next, Q_next = c.eta, tau, F_new, c.Q
     if method == "cg":
         T_xi, T_eta = S.transport_pair(X_new, c.xi, eta_used)
-        beta = jnp.maximum(_trace(G_new, xi_new - T_xi) / _trace(c.G, c.xi), 0.0)
+        beta = jnp.maximum(_trace(G_new, tmap(jnp.subtract, xi_new, T_xi)) / _trace(c.G, c.xi), 0.0)
         beta = jnp.where(jnp.isfinite(beta), beta, 0.0)
-        eta_next = jnp.where(retry, -c.xi, -xi_new + beta * T_eta)
+        eta_next = tmap(lambda x, xn, te: jnp.where(retry, -x, -xn + beta * te), c.xi, xi_new, T_eta)
     elif method == "bb":
-        Sd, Yd = X_new - c.X, xi_new - c.xi
-        MS = S.op.mv(Sd)
-        sy, ss, yy = jnp.abs(_trace(MS, Yd)), _trace(MS, Sd), _trace(Yd, S.op.mv(Yd))
+        Sd, Yd = tmap(jnp.subtract, X_new, c.X), tmap(jnp.subtract, xi_new, c.xi)
+        MS = S.mv(Sd)
+        sy, ss, yy = jnp.abs(_trace(MS, Yd)), _trace(MS, Sd), _trace(Yd, S.mv(Yd))
         bb = jnp.where(it % 2 == 1, ss / sy, sy / yy)
-        cap = solver.max_move / jnp.maximum(S.norm(X_new, xi_new), jnp.finfo(X_new.dtype).tiny)
+        cap = solver.max_move / jnp.maximum(S.norm(X_new, xi_new), jnp.finfo(ta.dtype_of(X_new)).tiny)
         step_next = jnp.where(jnp.isfinite(bb) & (bb > 0), jnp.minimum(bb, cap), tau)
         eta_next = xi_new
         Q_next = solver.bb_gamma * c.Q + 1.0
         C_next = (solver.bb_gamma * c.Q * c.C + F_new) / Q_next
-    keep = lambda new, old: jnp.where(good, new, old)  # noqa: E731
+    keep = lambda new, old: ta.where(good, new, old)  # noqa: E731
     S_mem, Y_mem, rho_mem, n_mem, n_pairs = c.S_mem, c.Y_mem, c.rho_mem, c.n_mem, c.n_pairs
     if method == "lbfgs":
-        m = S_mem.shape[0]
+        m = rho_mem.shape[0]
         n_mem = jnp.where(restart | retry, 0, n_mem)  # a reset empties the memory before the new pair
         n_pairs = jnp.where(restart | retry, 0, n_pairs)
-        s_new, y_new = tau * eta_used, xi_new - c.xi
+        s_new, y_new = tmap(lambda e: tau * e, eta_used), tmap(jnp.subtract, xi_new, c.xi)
         sy = S.inner(X_new, s_new, y_new)
-        store = good & (sy > jnp.finfo(X_new.dtype).eps * S.norm(X_new, s_new) * S.norm(X_new, y_new))
+        store = good & (sy > jnp.finfo(ta.dtype_of(X_new)).eps * S.norm(X_new, s_new) * S.norm(X_new, y_new))
         slot = n_pairs % m  # written in place (a select over the whole (m, n, k) buffer would copy it)
-        S_mem = S_mem.at[slot].set(jnp.where(store, s_new, S_mem[slot]))
-        Y_mem = Y_mem.at[slot].set(jnp.where(store, y_new, Y_mem[slot]))
+        S_mem = ta.set_at(S_mem, slot, ta.where(store, s_new, ta.take(S_mem, slot)))
+        Y_mem = ta.set_at(Y_mem, slot, ta.where(store, y_new, ta.take(Y_mem, slot)))
         rho_mem = rho_mem.at[slot].set(jnp.where(store, 1.0 / sy, rho_mem[slot]))
         n_mem = jnp.where(store, jnp.minimum(n_mem + 1, m), n_mem)
         n_pairs = jnp.where(store, n_pairs + 1, n_pairs)
@@ -266,7 +272,7 @@ def step(solver, fn, args, c: State) -> State:
     gn_rec = keep(gn_new, c.gnorm)
     return State(
         X=X_rec, F=F_rec, G=keep(G_new, c.G), xi=keep(xi_new, c.xi), gnorm=gn_rec,
-        eta=jnp.where(good | retry, eta_next, c.eta), step=keep(step_next, c.step), F_prev=c.F,
+        eta=ta.where(good | retry, eta_next, c.eta), step=keep(step_next, c.step), F_prev=c.F,
         C=keep(C_next, c.C), Q=keep(Q_next, c.Q), it=it, status=status,
         history=c.history.record(it, F_rec, gn_rec, tau, _watch(solver, X_rec)),
         recent=c.recent.at[it % c.recent.shape[0]].set(F_rec),

@@ -17,6 +17,7 @@ The slope is fitted on the longest run of consecutive steps where the log-log cu
 (residual ≤ 0.1 decade) and the error lies above round-off; errors at round-off everywhere mean the model
 is exact along that curve (``exact``, passed). A non-differentiable or non-finite objective yields a
 failed check with its slope, never an exception. ``SlopeCheck.plot()`` draws the log-log picture.
+On a ``stiefel.Product``, ``X`` and the directions are tuples of arrays.
 """
 
 from __future__ import annotations
@@ -31,8 +32,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import tangent_algebra as ta
 from .hessian import call, riemannian_hessian
 from .manifold import GeneralizedStiefel
+from .product import Product
+
+Manifold = GeneralizedStiefel | Product
 
 __all__ = ["SlopeCheck", "check_gradient", "check_hessian", "check_retraction", "fit_slope"]
 
@@ -138,7 +143,7 @@ def _call(fn: Callable, args: Any, X):
 @eqx.filter_jit
 def _along(fn, args, manifold, X, d, ts, use_exp: bool):
     move = manifold.exp if use_exp else manifold.retract
-    return jax.vmap(lambda t: _call(fn, args, move(X, t * d)))(ts)
+    return jax.vmap(lambda t: _call(fn, args, move(X, ta.tmap(lambda v: t * v, d))))(ts)
 
 
 @eqx.filter_jit
@@ -156,12 +161,15 @@ def _hess_apply(fn, args, hess, manifold, X, V):
     return hess(X, V, args) if args is not None else hess(X, V)
 
 
-def _direction(manifold: GeneralizedStiefel, X, direction, key):
+def _direction(manifold: Manifold, X, direction, key):
     if direction is None:
         key = jax.random.fold_in(jax.random.PRNGKey(0) if key is None else key, 7)
         return manifold.random_tangent(key, X)
-    d = manifold.proj(X, jnp.asarray(direction, X.dtype))
-    return d / manifold.norm(X, d)
+    if isinstance(manifold, Product):
+        manifold.check_shape(direction, name="direction")
+    d = manifold.proj(X, ta.tmap(lambda x, v: jnp.asarray(v, x.dtype), X, direction))
+    size = manifold.norm(X, d)
+    return ta.tmap(lambda v: v / size, d)
 
 
 def _verdict(what, steps, errors, floor, expected, details, *, at_least=False) -> SlopeCheck:
@@ -189,7 +197,14 @@ def _floor(values, dtype) -> float:
     return 1e2 * float(np.finfo(dtype).eps) * max(1.0, float(np.max(np.abs(v))) if v.size else 1.0)
 
 
-def check_gradient(fn: Callable, manifold: GeneralizedStiefel, X, *, args: Any = None,
+def _checked(manifold: Manifold, X):
+    """``X`` unchanged; on a ``Product``, its structure and shapes are checked first (``ShapeError``)."""
+    if isinstance(manifold, Product):
+        manifold.check_shape(X, name="X")
+    return X
+
+
+def check_gradient(fn: Callable, manifold: Manifold, X, *, args: Any = None,
                    egrad: Callable | None = None, direction=None, key=None, steps=STEPS) -> SlopeCheck:
     """Slope test of the Riemannian gradient of ``fn`` at ``X`` (module docstring).
 
@@ -200,19 +215,21 @@ def check_gradient(fn: Callable, manifold: GeneralizedStiefel, X, *, args: Any =
         custom JVPs, smoothings — and the manifold's gradient conversion and retraction).
       direction: a tangent (projected and normalised) or None: random from ``key``.
     """
+    X = _checked(manifold, X)
     value, g = _value_and_rgrad(fn, args, egrad, manifold, X)
     d = _direction(manifold, X, direction, key)
     f0 = float(value)
     slope = float(manifold.inner(X, g, d))
-    values = np.asarray(_along(fn, args, manifold, X, d, jnp.asarray(steps, X.dtype), False), float)
+    dt = ta.dtype_of(X)
+    values = np.asarray(_along(fn, args, manifold, X, d, jnp.asarray(steps, dt), False), float)
     errors = np.abs(values - f0 - steps * slope)
     gnorm = float(manifold.norm(X, g))
-    details = {"tangent_error": float(manifold.norm(X, g - manifold.proj(X, g))) / max(gnorm, 1e-300),
-               "grad_norm": gnorm}
-    return _verdict("gradient", steps, errors, _floor(np.r_[f0, values], X.dtype), 2.0, details)
+    details = {"tangent_error": float(manifold.norm(X, ta.tmap(jnp.subtract, g, manifold.proj(X, g))))
+               / max(gnorm, 1e-300), "grad_norm": gnorm}
+    return _verdict("gradient", steps, errors, _floor(np.r_[f0, values], dt), 2.0, details)
 
 
-def check_hessian(fn: Callable, manifold: GeneralizedStiefel, X, *, args: Any = None, hess: Callable | None = None,
+def check_hessian(fn: Callable, manifold: Manifold, X, *, args: Any = None, hess: Callable | None = None,
                   direction=None, key=None, steps=STEPS, curve: str = "exp") -> SlopeCheck:
     """Slope test of the Riemannian Hessian of ``fn`` at ``X`` (module docstring).
 
@@ -223,44 +240,50 @@ def check_hessian(fn: Callable, manifold: GeneralizedStiefel, X, *, args: Any = 
     """
     if curve not in ("exp", "retraction"):
         raise ValueError(f"curve must be 'exp' or 'retraction', got {curve!r}")
+    X = _checked(manifold, X)
     H = lambda Y, v: _hess_apply(fn, args, hess, manifold, Y, v)  # noqa: E731
     d = _direction(manifold, X, direction, key)
     value, g = _value_and_rgrad(fn, args, None, manifold, X)
     Hd = H(X, d)
     f0 = float(value)
     a1, a2 = float(manifold.inner(X, g, d)), float(manifold.inner(X, Hd, d))
-    values = np.asarray(_along(fn, args, manifold, X, d, jnp.asarray(steps, X.dtype), curve == "exp"), float)
+    dt = ta.dtype_of(X)
+    values = np.asarray(_along(fn, args, manifold, X, d, jnp.asarray(steps, dt), curve == "exp"), float)
     errors = np.abs(values - f0 - steps * a1 - 0.5 * steps ** 2 * a2)
     # symmetry, linearity, tangency with a second random direction
     e = _direction(manifold, X, None, jax.random.fold_in(jax.random.PRNGKey(0) if key is None else key, 11))
     He = H(X, e)
     scale = max(float(manifold.norm(X, Hd)), float(manifold.norm(X, He)), 1e-300)
-    lin = H(X, 2.0 * d - 3.0 * e) - (2.0 * Hd - 3.0 * He)
+    lin = ta.tmap(lambda a, b: a - b, H(X, ta.tmap(lambda a, b: 2.0 * a - 3.0 * b, d, e)),
+                  ta.tmap(lambda a, b: 2.0 * a - 3.0 * b, Hd, He))
     details = {"symmetry_error": abs(float(manifold.inner(X, Hd, e)) - float(manifold.inner(X, d, He))) / scale,
                "linearity_error": float(manifold.norm(X, lin)) / scale,
-               "tangent_error": float(manifold.norm(X, Hd - manifold.proj(X, Hd))) / scale}
-    return _verdict("hessian", steps, errors, _floor(np.r_[f0, values], X.dtype), 3.0, details)
+               "tangent_error": float(manifold.norm(X, ta.tmap(jnp.subtract, Hd, manifold.proj(X, Hd)))) / scale}
+    return _verdict("hessian", steps, errors, _floor(np.r_[f0, values], dt), 3.0, details)
 
 
 @eqx.filter_jit
 def _retraction_gap(manifold, X, d, ts):
     def gap(t):
-        diff = manifold.retract(X, t * d) - manifold.exp(X, t * d)
-        return jnp.sqrt(jnp.maximum(jnp.sum(diff * manifold.op.mv(diff)), 0.0))
+        td = ta.tmap(lambda v: t * v, d)
+        diff = ta.tmap(jnp.subtract, manifold.retract(X, td), manifold.exp(X, td))
+        return jnp.sqrt(jnp.maximum(ta.inner(diff, manifold.mv(diff)), 0.0))
     return jax.vmap(gap)(ts)
 
 
-def check_retraction(manifold: GeneralizedStiefel, X, *, direction=None, key=None, steps=STEPS) -> SlopeCheck:
+def check_retraction(manifold: Manifold, X, *, direction=None, key=None, steps=STEPS) -> SlopeCheck:
     """Slope test of the manifold's retraction against its exponential map (module docstring): passes for
     slope ≥ 2 (a first-order retraction); ``details["order"]`` is ``slope − 1`` (2 for second order)."""
+    X = _checked(manifold, X)
     d = _direction(manifold, X, direction, key)
-
-    errors = np.asarray(_retraction_gap(manifold, X, d, jnp.asarray(steps, X.dtype)), float)
-    details = {"at_zero": float(jnp.max(jnp.abs(manifold.retract(X, jnp.zeros_like(X)) - X))),
-               "dist_to_manifold": float(manifold.dist_to_manifold(manifold.retract(X, float(steps[-1]) * d)))}
-    check = _verdict("retraction", steps, errors, _floor([1.0], X.dtype), 2.0, details, at_least=True)
+    dt = ta.dtype_of(X)
+    errors = np.asarray(_retraction_gap(manifold, X, d, jnp.asarray(steps, dt)), float)
+    far = manifold.retract(X, ta.tmap(lambda v: float(steps[-1]) * v, d))
+    details = {"at_zero": float(ta.max_abs(ta.tmap(jnp.subtract, manifold.retract(X, manifold.zero_vector(X)), X))),
+               "dist_to_manifold": float(manifold.dist_to_manifold(far))}
+    check = _verdict("retraction", steps, errors, _floor([1.0], dt), 2.0, details, at_least=True)
     details["order"] = check.slope - 1.0 if np.isfinite(check.slope) else float("inf")
-    tol = 1e4 * float(np.finfo(X.dtype).eps)
+    tol = 1e4 * float(np.finfo(dt).eps)
     if check.passed and not (details["at_zero"] <= tol and details["dist_to_manifold"] <= tol):
         check = dataclasses.replace(check, passed=False, message=check.message.replace(
             "passed", "FAILED", 1) + " — R_X(0) ≠ X or R_X(td) off the manifold")

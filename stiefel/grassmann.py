@@ -124,6 +124,12 @@ class Grassmann(GeneralizedStiefel):
         sin = jnp.sqrt(jnp.clip(jnp.linalg.eigvalsh(0.5 * (G + G.T)), 0.0, 1.0))  # ascending
         return jnp.where(cos > 0.7, jnp.arcsin(sin), jnp.arccos(cos))
 
+    # the aliases of GeneralizedStiefel name its own functions: re-bound to the horizontal versions here
+    projection = proj
+    to_tangent_space = proj
+    euclidean_to_riemannian_gradient = egrad_to_rgrad
+    euclidean_to_riemannian_hessian = ehess_to_rhess
+
 
 def sphere(n: int, M=None, **options) -> GeneralizedStiefel:
     """The unit sphere (``M = None``) or ellipsoid ``xᵀMx = 1`` in R^n: ``GeneralizedStiefel`` with k = 1;

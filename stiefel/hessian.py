@@ -10,6 +10,8 @@ for tangent ``ξ`` (the projection of the ambient derivative of the gradient fie
 Levi-Civita connection of the embedded metric). It is self-adjoint in ``⟨·,·⟩``. For the
 canonical metric the same operator is returned: at a critical point the Hessian does not
 depend on the metric, and docs/maths.md §9 prescribes this form for second-order work.
+On a ``stiefel.Product`` ``X``, ``ξ`` and the result are tuples: ``H[ξ]`` carries the cross terms of a
+coupled F, and the formula applies factor by factor (``Product.ehess_to_rhess``).
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import jax
 from jaxtyping import Array, Float
 
 from .manifold import GeneralizedStiefel
+from .product import Product
 
 __all__ = ["riemannian_hessian", "hessian_operator"]
 
@@ -44,7 +47,7 @@ def _euclidean(fn: Callable, args: Any):
     return lambda X: call(fn, X, args)
 
 
-def riemannian_hessian(fn: Callable, manifold: GeneralizedStiefel, X: Float[Array, "n k"],
+def riemannian_hessian(fn: Callable, manifold: GeneralizedStiefel | Product, X: Float[Array, "n k"],
                        xi: Float[Array, "n k"], args: Any = None) -> Float[Array, "n k"]:
     """``Hess F(X)[ξ]`` for tangent ``ξ`` (module docstring); ``fn(X)`` or ``fn(X, args)`` → scalar (an
     optimistix-style ``fn(X, args)`` is called with ``args = None`` when none is given).
@@ -56,7 +59,7 @@ def riemannian_hessian(fn: Callable, manifold: GeneralizedStiefel, X: Float[Arra
     return manifold.ehess_to_rhess(X, G, H, xi)
 
 
-def hessian_operator(fn: Callable, manifold: GeneralizedStiefel, X: Float[Array, "n k"],
+def hessian_operator(fn: Callable, manifold: GeneralizedStiefel | Product, X: Float[Array, "n k"],
                      args: Any = None) -> Callable[[Float[Array, "n k"]], Float[Array, "n k"]]:
     """``ξ ↦ Hess F(X)[ξ]`` with the gradient linearised once (``jax.linearize``): repeated
     products (e.g. inside CG) cost one linearised Hessian action each."""

@@ -53,7 +53,9 @@ import jax.tree_util as jtu
 import lineax as lx
 import optimistix as optx
 
+from .errors import ParameterError
 from .manifold import sym
+from .product import Product
 from .result import Status
 from .validation import check_count, check_positive
 
@@ -156,6 +158,8 @@ class RiemannianImplicitAdjoint(optx.AbstractAdjoint):
       tol: relative tolerance of the adjoint CG (on the scaled right-hand side).
       max_steps: CG iterations (default: lineax's 10·nk).
       throw: a derivative through a non-converged solve raises (True) or is NaN (False).
+
+    Not for a ``stiefel.Product`` (``ParameterError`` when the solve is set up).
     """
 
     invariant: bool = eqx.field(static=True, default=False)
@@ -171,6 +175,9 @@ class RiemannianImplicitAdjoint(optx.AbstractAdjoint):
 
     def apply(self, primal_fn, rewrite_fn, inputs, tags):
         del rewrite_fn, tags
+        if isinstance(getattr(inputs[1], "manifold", None), Product):
+            raise ParameterError("RiemannianImplicitAdjoint does not support a stiefel.Product; solve without it "
+                                 "(optimistix's default adjoint) when no derivative of the solution is needed")
         inputs = inputs + (ft.partial(eqxi.while_loop, kind="lax"),)
         root, residual = _implicit(primal_fn, inputs, self)
         return root, jtu.tree_map(eqxi.nondifferentiable_backward, residual)

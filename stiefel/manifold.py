@@ -96,6 +96,11 @@ class GeneralizedStiefel(eqx.Module):
         return self.n * self.k - self.k * (self.k + 1) // 2
 
     @property
+    def typical_dist(self) -> float:
+        """A typical distance between points, ``√k`` (Manopt's ``typicaldist``; the trust-region radius scale)."""
+        return float(np.sqrt(self.k))
+
+    @property
     def dtype(self):
         if isinstance(self.op, IdentityOperator):
             return self.op.dtype
@@ -117,6 +122,16 @@ class GeneralizedStiefel(eqx.Module):
     def norm(self, X: Point, Z: Point) -> Float[Array, ""]:
         return jnp.sqrt(jnp.maximum(self.inner(X, Z, Z), 0.0))
 
+    def mv(self, Z: Point) -> Point:
+        """``MZ``: the ambient product with M (``tr(Z1ᵀ·mv(Z2))`` is the M-weighted metric)."""
+        return self.op.mv(Z)
+
+    def tangent_residual(self, X: Point, G: Point) -> Point:
+        """``R = G − MX sym(XᵀG)`` for the Euclidean gradient ``G``: ``tr(RᵀZ) = tr(GᵀZ)`` for tangent Z, and
+        R vanishes at critical points (the slopes of ``stiefel.block_steps``; ``M·grad`` of the M-weighted
+        metric)."""
+        return G - self.op.mv(X) @ sym(X.T @ G)
+
     def egrad_to_rgrad(self, X: Point, G: Point) -> Point:
         """Riemannian gradient from the Euclidean partial derivative ``G = ∂F/∂X`` (docs/maths.md §1).
 
@@ -126,6 +141,13 @@ class GeneralizedStiefel(eqx.Module):
         if self.metric == "canonical":
             return MinvG - X @ (G.T @ X)
         return MinvG - X @ sym(X.T @ G)
+
+    def weighted_rgrad(self, X: Point, G: Point) -> Point:
+        """The Riemannian gradient of the M-weighted metric ``tr(Z1ᵀMZ2)``, ``M⁻¹G − X sym(XᵀG)``, whatever
+        the manifold's metric (the trust-region model's; ``egrad_to_rgrad`` for ``metric="euclidean"``)."""
+        if self.metric == "euclidean":
+            return self.egrad_to_rgrad(X, G)
+        return self.op.solve(G) - X @ sym(X.T @ G)
 
     def ehess_to_rhess(self, X: Point, G: Point, H: Point, xi: Point) -> Point:
         """Riemannian Hessian ``P_X(M⁻¹H − ξ sym(XᵀG))`` from the Euclidean gradient ``G`` and the
@@ -202,14 +224,18 @@ class GeneralizedStiefel(eqx.Module):
         """``max |XᵀMX − I|``."""
         return jnp.max(jnp.abs(X.T @ self.op.mv(X) - jnp.eye(X.shape[1], dtype=X.dtype)))
 
-    def check_point(self, X, *, atol: float = 1e-8, name: str = "X0") -> None:
-        """Raise ``ShapeError``/``OffManifoldError`` unless ``X`` is an ``(n, k)`` point of S_M (host-side);
-        ``RankDeficientError`` (an ``OffManifoldError``) names a start with dependent columns."""
+    def check_shape(self, X, *, name: str = "X0") -> None:
+        """Raise ``ShapeError`` unless ``X`` (an array or its ``jax.ShapeDtypeStruct``) has shape ``(n, k)``."""
         shape = tuple(np.shape(X))
         sized = not (isinstance(self.op, IdentityOperator) and self.op.size is None)
         if len(shape) != 2 or shape[1] != self.k or shape[0] < self.k or (sized and shape[0] != self.n):
             want = (self.n if sized else "n ≥ k", self.k)
             raise ShapeError(f"{name} must have shape (n, k) = {want}, got {shape}")
+
+    def check_point(self, X, *, atol: float = 1e-8, name: str = "X0") -> None:
+        """Raise ``ShapeError``/``OffManifoldError`` unless ``X`` is an ``(n, k)`` point of S_M (host-side);
+        ``RankDeficientError`` (an ``OffManifoldError``) names a start with dependent columns."""
+        self.check_shape(X, name=name)
         Xj = jnp.asarray(X, dtype=self.dtype)
         if not bool(jnp.all(jnp.isfinite(Xj))):
             raise OffManifoldError(f"{name} has non-finite entries")

@@ -2,7 +2,8 @@
 
 ``optx.minimise(fn, RiemannianCG(S, rtol=..., atol=...), X0, args, max_steps=...,
 adjoint=stiefel.RiemannianImplicitAdjoint())`` minimises ``fn(X, args)`` over
-``X ∈ S_M = {XᵀMX = I}``. Three methods share one state and one step:
+``X ∈ S_M = {XᵀMX = I}`` (or over a ``stiefel.Product`` of such manifolds, ``X`` a tuple). Three
+methods share one state and one step:
 
 * ``RiemannianCG`` — nonlinear CG (Polak–Ribière+, restart on non-descent), strong
   Armijo–Wolfe search on the exact ``h(τ) = F(R_X(τη))``, transport by projection.
@@ -36,9 +37,10 @@ import optimistix as optx
 from . import block_steps as _steps
 from ._compile import host_array
 from .block_steps import State
-from .errors import StiefelError
+from .errors import ParameterError, StiefelError
 from .manifold import GeneralizedStiefel
 from .preconditioning import PRECONDITIONING_MODES
+from .product import Product
 from .result import Status
 from .validation import (check_count, check_nonnegative, check_positive, check_unit_interval, check_wolfe,
                          is_traced_value)
@@ -55,6 +57,16 @@ def _scalar(x):
 def _budget(x):
     """The runtime iteration limit as an int32 array (checked first: ``True`` or ``2.5`` is no count)."""
     return None if x is None else host_array(check_count("budget", x, 0), np.int32)
+
+
+def _check_manifold(manifold, preconditioner) -> None:
+    """A solver's manifold is a ``GeneralizedStiefel`` or a ``Product`` (then without a preconditioner)."""
+    if not isinstance(manifold, (GeneralizedStiefel, Product)):
+        raise StiefelError(f"the first argument must be a stiefel.GeneralizedStiefel or stiefel.Product, "
+                           f"got {type(manifold).__name__}")
+    if isinstance(manifold, Product) and preconditioner is not None:
+        raise ParameterError("a preconditioner is not supported on a stiefel.Product (it acts on one (n, k) "
+                             "array); pass preconditioner=None")
 
 
 def to_optx_result(status):
@@ -74,10 +86,12 @@ class _RiemannianMinimiser(optx.AbstractMinimiser):
     """Shared fields and the optimistix protocol; subclasses fix ``method`` and add their own options.
 
     Fields (all scalars are runtime arrays):
-      manifold: the ``GeneralizedStiefel`` (its metric, retraction and M).
+      manifold: the ``GeneralizedStiefel`` (its metric, retraction and M), or a ``stiefel.Product`` of them
+        (points are tuples; ``ShapeError`` at ``init`` for a start of the wrong structure or shapes).
       rtol, atol: stop when ``‖grad F‖ ≤ atol + rtol·|F|`` (manifold metric).
       preconditioner: None or a callable ``Y ↦ PY`` (P SPD, e.g. ``op.solve`` of
-        ``stiefel.shifted_inverse(W, M, σ)``); ``precondition``: ``"residual"`` or ``"metric"``.
+        ``stiefel.shifted_inverse(W, M, σ)``); ``precondition``: ``"residual"`` or ``"metric"``. Not with a
+        ``Product`` (``ParameterError``).
       c1, c2: Armijo / curvature constants; ls_max_evals: evaluations per line search.
       init_step: first step in units of 1/‖grad‖; max_move: cap on τ‖η‖ per step.
       ftol, ftol_window: stall test (0 disables; window ≤ ``STALL_WINDOW_MAX``); xtol: step test.
@@ -93,7 +107,7 @@ class _RiemannianMinimiser(optx.AbstractMinimiser):
     cannot be and are not.
     """
 
-    manifold: GeneralizedStiefel
+    manifold: GeneralizedStiefel | Product
     rtol: jax.Array = eqx.field(converter=_scalar, default=0.0)
     atol: jax.Array = eqx.field(converter=_scalar, default=1e-6)
     preconditioner: Callable | None = None
@@ -117,8 +131,7 @@ class _RiemannianMinimiser(optx.AbstractMinimiser):
     memory_size: ClassVar[int] = 0
 
     def __check_init__(self):
-        if not isinstance(self.manifold, GeneralizedStiefel):
-            raise StiefelError(f"the first argument must be a stiefel.GeneralizedStiefel, got {type(self.manifold).__name__}")
+        _check_manifold(self.manifold, self.preconditioner)
         if self.precondition not in PRECONDITIONING_MODES:
             raise StiefelError(f"unknown precondition mode {self.precondition!r}; choose one of {PRECONDITIONING_MODES}")
         check_count("ls_max_evals", self.ls_max_evals)
@@ -135,6 +148,8 @@ class _RiemannianMinimiser(optx.AbstractMinimiser):
 
     # --- optimistix protocol -------------------------------------------------------------------
     def init(self, fn, y, args, options, f_struct, aux_struct, tags) -> State:
+        if isinstance(self.manifold, Product):
+            self.manifold.check_shape(y, name="y0")
         return _steps.init_state(self, fn, y, args)
 
     def step(self, fn, y, args, options, state: State, tags):

@@ -38,8 +38,10 @@ from ._compile import is_traced, run_compiled
 from .driver import _stopped
 from .errors import RankDeficientError, ShapeError, StiefelError
 from .linesearch import along_curve, strong_wolfe
+from .manifold import GeneralizedStiefel
 from .operators import LinearOperator, as_operator
 from .preconditioning import PRECONDITIONING_MODES, as_preconditioner, constrained_preconditioned_gradient
+from .product import Product
 from .result import History, SequentialResult, Status
 from .validation import (check_count, check_finite, check_full_rank, check_nonnegative, check_number, check_wolfe,
                          is_integer)
@@ -318,6 +320,9 @@ def minimize_sequential(
     """
     if direction not in DIRECTIONS:
         raise StiefelError(f"unknown direction {direction!r}; choose one of {DIRECTIONS}")
+    if isinstance(M, (GeneralizedStiefel, Product)):
+        raise StiefelError(f"minimize_sequential takes the matrix M (and k), not a manifold ({type(M).__name__}); "
+                           "pass S.op for a GeneralizedStiefel S (a stiefel.Product is not supported)")
     if is_traced(f, M, X0, preconditioner):
         raise StiefelError(
             "minimize_sequential cannot run inside jax.grad/jax.jvp/jit (it is a host loop over columns and "

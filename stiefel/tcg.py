@@ -10,6 +10,7 @@ None). Stops at negative curvature or the boundary (both then land on the bounda
 the residual has dropped to ``‖r0‖·min(‖r0‖^θ, κ)`` (θ = 1 gives the outer method local quadratic
 convergence), after ``max_inner`` iterations, or when ``⟨Pr, r⟩ ≤ 0`` for ``r ≠ 0`` (the preconditioner
 is not positive definite there). The norms ``⟨η, P⁻¹η⟩`` are kept by recurrences: P⁻¹ is never applied.
+Tangent vectors may be arrays or tuples of arrays (a ``stiefel.Product``; ``stiefel.tangent_algebra``).
 """
 
 from __future__ import annotations
@@ -19,6 +20,8 @@ from typing import Callable, NamedTuple
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
+
+from . import tangent_algebra as ta
 
 __all__ = ["TCGStop", "TCGResult", "truncated_cg"]
 
@@ -67,12 +70,12 @@ def truncated_cg(hess: Callable, precondition: Callable | None, inner: Callable,
       precondition: tangent ``r ↦ Pr`` (SPD in ``inner``) or None.
       inner: ``(a, b) ↦ ⟨a, b⟩`` on ``T_X``; proj: ambient ``↦`` tangent (re-applied to residuals and
         directions against drift).
-      grad: the Riemannian gradient ``g`` (tangent, ``(n, k)``).
+      grad: the Riemannian gradient ``g`` (tangent, ``(n, k)``, or a tuple of them).
       radius: ``Δ > 0``; max_inner: iteration bound (runtime); kappa, theta: the residual target.
     """
     P = precondition if precondition is not None else (lambda r: r)
-    dt = grad.dtype
-    zero = jnp.zeros_like(grad)
+    dt = ta.dtype_of(grad)
+    zero = ta.zeros_like(grad)
     z0 = P(grad)
     z_r0 = inner(z0, grad)
     norm_r0 = jnp.sqrt(jnp.maximum(inner(grad, grad), 0.0))
@@ -80,7 +83,8 @@ def truncated_cg(hess: Callable, precondition: Callable | None, inner: Callable,
     bad0 = (norm_r0 > 0) & ~(z_r0 > 0)
     stop0 = jnp.where(bad0, TCGStop.INDEFINITE_PRECONDITIONER,
                       jnp.where(norm_r0 == 0, TCGStop.CONVERGED, TCGStop.RUNNING))
-    start = _Loop(jnp.zeros((), jnp.int32), zero, zero, grad, -z0, jnp.zeros((), dt), jnp.zeros((), dt),
+    start = _Loop(jnp.zeros((), jnp.int32), zero, zero, grad, ta.tmap(jnp.negative, z0), jnp.zeros((), dt),
+                  jnp.zeros((), dt),
                   z_r0, z_r0, jnp.asarray(stop0, jnp.int32))
 
     def body(c: _Loop) -> _Loop:
@@ -93,21 +97,21 @@ def truncated_cg(hess: Callable, precondition: Callable | None, inner: Callable,
         disc = jnp.maximum(c.e_Pd ** 2 + c.d_Pd * (radius ** 2 - c.e_Pe), 0.0)
         tau = (-c.e_Pd + jnp.sqrt(disc)) / c.d_Pd
         t = jnp.where(to_boundary, tau, alpha)
-        eta, Heta = c.eta + t * c.delta, c.Heta + t * Hd
+        eta, Heta = ta.tmap(lambda e, d: e + t * d, c.eta, c.delta), ta.tmap(lambda e, d: e + t * d, c.Heta, Hd)
         j = c.j + 1
-        r = proj(c.r + alpha * Hd)
+        r = proj(ta.tmap(lambda r, d: r + alpha * d, c.r, Hd))
         norm_r = jnp.sqrt(jnp.maximum(inner(r, r), 0.0))
         z = P(r)
         z_r = inner(z, r)
         beta = z_r / c.z_r
-        delta = proj(-z + beta * c.delta)
+        delta = proj(ta.tmap(lambda z, d: -z + beta * d, z, c.delta))
         stop = jnp.where(
             to_boundary, jnp.where(d_Hd > 0, TCGStop.EXCEEDED_RADIUS, TCGStop.NEGATIVE_CURVATURE),
             jnp.where((j >= min_inner) & (norm_r <= target), TCGStop.CONVERGED,
                       jnp.where((norm_r > 0) & ~(z_r > 0), TCGStop.INDEFINITE_PRECONDITIONER,
                                 jnp.where(j >= max_inner, TCGStop.MAX_INNER, TCGStop.RUNNING))))
         inside = ~to_boundary
-        return _Loop(j, eta, Heta, jnp.where(inside, r, c.r), jnp.where(inside, delta, c.delta),
+        return _Loop(j, eta, Heta, ta.where(inside, r, c.r), ta.where(inside, delta, c.delta),
                      jnp.where(inside, e_Pe_new, c.e_Pe), jnp.where(inside, beta * (c.e_Pd + alpha * c.d_Pd), c.e_Pd),
                      jnp.where(inside, z_r + beta ** 2 * c.d_Pd, c.d_Pd), jnp.where(inside, z_r, c.z_r),
                      stop.astype(jnp.int32))

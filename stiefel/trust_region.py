@@ -43,10 +43,12 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from . import tangent_algebra as ta
 from ._compile import host_array, is_traced
 from .errors import ParameterError, ShapeError, StiefelError
-from .manifold import GeneralizedStiefel, sym
-from .minimisers import _budget, _scalar, to_optx_result
+from .manifold import GeneralizedStiefel
+from .minimisers import _budget, _check_manifold, _scalar, to_optx_result
+from .product import Product
 from .result import History, Status
 from .tcg import TCGStop, truncated_cg
 from .validation import check_count, check_nonnegative, check_number, check_positive, is_traced_value
@@ -84,11 +86,11 @@ class RiemannianTrustRegion(optx.AbstractMinimiser):
     max_radius=None, rho_prime=0.1, max_inner=None, kappa=0.1, theta=1.0, ...)``
 
     Fields (scalars are runtime arrays):
-      manifold: the ``GeneralizedStiefel``; rtol, atol: the gradient-norm stopping test.
+      manifold: the ``GeneralizedStiefel`` or ``stiefel.Product``; rtol, atol: the gradient-norm stopping test.
       hessian: ``"exact"`` (autodiff) or ``"fd"`` (finite differences of the gradient).
-      preconditioner: None or ``Y ↦ PY`` (P SPD).
-      radius: initial ``Δ0 > 0`` (default ``max_radius/8``); max_radius: ``Δ̄ > 0`` (default ``√k``,
-        Manopt's typical distance on S_M); min_radius: the collapse threshold (default
+      preconditioner: None or ``Y ↦ PY`` (P SPD); not with a ``Product`` (``ParameterError``).
+      radius: initial ``Δ0 > 0`` (default ``max_radius/8``); max_radius: ``Δ̄ > 0`` (default the manifold's
+        ``typical_dist``, ``√k`` on S_M, Manopt's); min_radius: the collapse threshold (default
         ``10⁻¹²·max_radius``).
       rho_prime: acceptance threshold in ``[0, ¼)``; rho_regularization: the ``10³`` above.
       max_inner: inner iterations per outer one (default: the manifold dimension, at most 10⁶);
@@ -96,7 +98,7 @@ class RiemannianTrustRegion(optx.AbstractMinimiser):
       monitor, history, budget: as in ``stiefel.RiemannianCG``.
     """
 
-    manifold: GeneralizedStiefel
+    manifold: GeneralizedStiefel | Product
     rtol: jax.Array = eqx.field(converter=_scalar, default=0.0)
     atol: jax.Array = eqx.field(converter=_scalar, default=1e-6)
     hessian: str = eqx.field(static=True, default="exact")
@@ -115,14 +117,12 @@ class RiemannianTrustRegion(optx.AbstractMinimiser):
     norm: Any = eqx.field(static=True, default=None)
 
     def __post_init__(self):
-        if not isinstance(self.manifold, GeneralizedStiefel):
-            raise StiefelError(f"the first argument must be a stiefel.GeneralizedStiefel, "
-                               f"got {type(self.manifold).__name__}")
+        _check_manifold(self.manifold, self.preconditioner)
         if self.hessian not in HESSIANS:
             raise StiefelError(f"unknown hessian {self.hessian!r}; choose one of {HESSIANS}")
         S = self.manifold
         if self.max_radius is None:
-            self.max_radius = float(np.sqrt(S.k))
+            self.max_radius = S.typical_dist
         check_positive("max_radius", self.max_radius)
         if self.radius is None:
             self.radius = self.max_radius / 8.0
@@ -174,14 +174,11 @@ class RiemannianTrustRegion(optx.AbstractMinimiser):
 
     # --- pieces ----------------------------------------------------------------------------------
     def _inner(self, a, b):
-        return jnp.sum(a * self.manifold.op.mv(b))
+        return ta.inner(a, self.manifold.mv(b))
 
     def _rgrad(self, X, G):
         """The gradient of the M-weighted metric (the manifold's own for ``Grassmann``)."""
-        S = self.manifold
-        if S.metric == "euclidean":
-            return S.egrad_to_rgrad(X, G)
-        return S.op.solve(G) - X @ sym(X.T @ G)
+        return self.manifold.weighted_rgrad(X, G)
 
     def _gnorm(self, X, G, rg):
         S = self.manifold
@@ -198,9 +195,9 @@ class RiemannianTrustRegion(optx.AbstractMinimiser):
         def fd(d):
             nd = jnp.sqrt(jnp.maximum(self._inner(d, d), 0.0))
             t = FD_STEP / jnp.where(nd > 0, nd, 1.0)
-            X1 = S.retract(X, t * d)
+            X1 = S.retract(X, ta.tmap(lambda e: t * e, d))
             g1 = S.proj(X, self._rgrad(X1, grad(X1)))
-            return jnp.where(nd > 0, (g1 - rg) / t, jnp.zeros_like(d))
+            return ta.tmap(lambda a, b, e: jnp.where(nd > 0, (a - b) / t, jnp.zeros_like(e)), g1, rg, d)
         return fd, 0, 1
 
     def _precondition(self, X):
@@ -208,7 +205,7 @@ class RiemannianTrustRegion(optx.AbstractMinimiser):
         if P is None:
             return None
         S = self.manifold
-        return lambda r: S.proj(X, P(S.op.mv(r)))
+        return lambda r: S.proj(X, P(S.mv(r)))
 
     def _converged(self, gn, F):
         return gn <= self.atol + self.rtol * jnp.abs(F)
@@ -218,14 +215,16 @@ class RiemannianTrustRegion(optx.AbstractMinimiser):
 
     # --- optimistix protocol ---------------------------------------------------------------------
     def init(self, fn, y, args, options, f_struct, aux_struct, tags) -> TRState:
+        if isinstance(self.manifold, Product):
+            self.manifold.check_shape(y, name="y0")
         (F0, aux0), G0 = jax.value_and_grad(lambda X: fn(X, args), has_aux=True)(y)
         rg0 = self._rgrad(y, G0)
         gn0 = self._gnorm(y, G0, rg0)
-        finite = jnp.isfinite(F0) & jnp.all(jnp.isfinite(G0))
+        finite = jnp.isfinite(F0) & ta.all_finite(G0)
         status = jnp.where(~finite, Status.NON_FINITE, jnp.where(self._converged(gn0, F0), Status.CONVERGED, -1))
         if self.budget is not None:
             status = jnp.where((status < 0) & (self.budget <= 0), Status.MAX_ITERS, status)
-        dt = y.dtype
+        dt = ta.dtype_of(y)
         zi = jnp.zeros((), jnp.int32)
         hist = History.empty(max(self.history, 1), dt).record(0, F0, gn0, 0.0, self._watch(y))
         return TRState(X=y, F=F0, G=G0, rg=rg0, gnorm=gn0, radius=jnp.asarray(self.radius, dt), it=zi,
@@ -242,7 +241,7 @@ class RiemannianTrustRegion(optx.AbstractMinimiser):
         predicted = -(self._inner(c.rg, eta) + 0.5 * self._inner(eta, tcg.Heta))
         X_new = S.retract(c.X, eta)
         (F_new, aux_new), G_new = jax.value_and_grad(lambda X: fn(X, args), has_aux=True)(X_new)
-        finite = jnp.isfinite(F_new) & jnp.all(jnp.isfinite(G_new)) & jnp.all(jnp.isfinite(X_new))
+        finite = jnp.isfinite(F_new) & ta.all_finite(G_new) & ta.all_finite(X_new)
         reg = self.rho_regularization * jnp.finfo(c.F.dtype).eps * jnp.maximum(1.0, jnp.abs(c.F))
         rho = (c.F - F_new + reg) / (predicted + reg)
         rho = jnp.where(finite & (predicted >= 0), rho, -jnp.inf)
@@ -252,7 +251,7 @@ class RiemannianTrustRegion(optx.AbstractMinimiser):
                                      c.radius))
         rg_new = self._rgrad(X_new, G_new)
         gn_new = self._gnorm(X_new, G_new, rg_new)
-        keep = lambda new, old: jnp.where(accept, new, old)  # noqa: E731
+        keep = lambda new, old: ta.where(accept, new, old)  # noqa: E731
         X, F, gn = keep(X_new, c.X), keep(F_new, c.F), keep(gn_new, c.gnorm)
         it = c.it + 1
         status = jnp.where(
