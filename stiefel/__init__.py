@@ -70,6 +70,7 @@ from .operators import DenseOperator, DiagonalOperator, IdentityOperator, Linear
 from .penalty import PenaltyResult, penalty_minimize
 from .preconditioning import (
     PRECONDITIONING_MODES,
+    PointPreconditioner,
     as_preconditioner,
     preconditioned_gradient,
     preconditioned_residual,

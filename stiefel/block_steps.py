@@ -17,7 +17,7 @@ import jax.numpy as jnp
 
 from . import tangent_algebra as ta
 from .linesearch import along_curve, strong_wolfe
-from .preconditioning import preconditioned_gradient, preconditioned_residual
+from .preconditioning import at_point, preconditioned_gradient, preconditioned_residual
 from .result import History, Status
 
 __all__ = ["State", "init_state", "step"]
@@ -59,7 +59,7 @@ def _value_and_grad(fn, args):
 
 def _gradients(solver, X, G):
     """(search gradient ξ, manifold-metric gradient norm, tangent residual R)."""
-    S, P = solver.manifold, solver.preconditioner
+    S, P = solver.manifold, at_point(solver.preconditioner, X)
     rg = S.egrad_to_rgrad(X, G)
     gn = S.norm(X, rg)
     R = S.tangent_residual(X, G)
@@ -129,7 +129,7 @@ def _wolfe_search(solver, F, args, c: State, eta, slope, guess, scale):
 
 def _precondition_tangent(solver, X, q):
     """The preconditioner as a map of tangent vectors (the L-BFGS initial inverse Hessian)."""
-    S, P = solver.manifold, solver.preconditioner
+    S, P = solver.manifold, at_point(solver.preconditioner, X)
     Mq = S.mv(q)
     if solver.precondition == "metric":
         return preconditioned_gradient(S.op, P, X, Mq)

@@ -89,8 +89,9 @@ class _RiemannianMinimiser(optx.AbstractMinimiser):
       manifold: the ``GeneralizedStiefel`` (its metric, retraction and M), or a ``stiefel.Product`` of them
         (points are tuples; ``ShapeError`` at ``init`` for a start of the wrong structure or shapes).
       rtol, atol: stop when ``‖grad F‖ ≤ atol + rtol·|F|`` (manifold metric).
-      preconditioner: None or a callable ``Y ↦ PY`` (P SPD, e.g. ``op.solve`` of
-        ``stiefel.shifted_inverse(W, M, σ)``); ``precondition``: ``"residual"`` or ``"metric"``. Not with a
+      preconditioner: None, a callable ``Y ↦ PY`` (P SPD, e.g. ``op.solve`` of
+        ``stiefel.shifted_inverse(W, M, σ)``) or a ``stiefel.PointPreconditioner`` (``P_X``, applied at the
+        current iterate); ``precondition``: ``"residual"`` or ``"metric"``. Not with a
         ``Product`` (``ParameterError``).
       c1, c2: Armijo / curvature constants; ls_max_evals: evaluations per line search.
       init_step: first step in units of 1/‖grad‖; max_move: cap on τ‖η‖ per step.

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 from typing import Callable
 
+import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
@@ -33,6 +34,8 @@ from .operators import LinearOperator, as_operator
 from .validation import check_positive
 
 __all__ = [
+    "PointPreconditioner",
+    "at_point",
     "as_preconditioner",
     "shifted_inverse",
     "preconditioned_gradient",
@@ -44,15 +47,35 @@ __all__ = [
 PRECONDITIONING_MODES = ("residual", "metric")
 
 
-def as_preconditioner(P) -> Callable | None:
+class PointPreconditioner(eqx.Module):
+    """A preconditioner that depends on the point (Manopt's ``precon(x, d)``): ``apply(X, Y) = P_X Y``
+    with ``P_X`` SPD on ``R^{n×k}`` for every X on the manifold, e.g. an approximate inverse of the
+    objective's Hessian at X. The solvers take it as ``preconditioner=`` and apply ``P_X`` at their
+    current iterate (trust regions: to every inner CG residual of an outer iteration; CG / L-BFGS / BB:
+    to the gradient at X). ``apply`` must be jittable; its closed-over arrays are traced leaves."""
+
+    apply: Callable
+
+    def at(self, X) -> Callable:
+        """``Y ↦ P_X Y``."""
+        return lambda Y: self.apply(X, Y)
+
+
+def at_point(P, X) -> Callable | None:
+    """The preconditioner to use at ``X``: ``P.at(X)`` for a ``PointPreconditioner``, else ``P`` itself."""
+    return P.at(X) if isinstance(P, PointPreconditioner) else P
+
+
+def as_preconditioner(P) -> Callable | PointPreconditioner | None:
     """Normalise a preconditioner argument to a callable ``Y ↦ P Y`` (or None).
 
     ``P`` may be None, a callable applying an SPD ``P`` to ``(n, k)`` arrays, or an
     SPD matrix / ``LinearOperator`` ``K`` (dense, diagonal or ``scipy.sparse``)
-    whose *inverse* is applied: ``P = K⁻¹`` (sparse K is factored once).
+    whose *inverse* is applied: ``P = K⁻¹`` (sparse K is factored once). A
+    ``PointPreconditioner`` is returned as it is (the solvers apply it at each point).
     """
-    if P is None:
-        return None
+    if P is None or isinstance(P, PointPreconditioner):
+        return P
     if isinstance(P, LinearOperator):
         return P.solve
     if callable(P):

@@ -48,6 +48,7 @@ from ._compile import host_array, is_traced
 from .errors import ParameterError, ShapeError, StiefelError
 from .manifold import GeneralizedStiefel
 from .minimisers import _budget, _check_manifold, _scalar, to_optx_result
+from .preconditioning import at_point
 from .product import Product
 from .result import History, Status
 from .tcg import TCGStop, truncated_cg
@@ -88,7 +89,9 @@ class RiemannianTrustRegion(optx.AbstractMinimiser):
     Fields (scalars are runtime arrays):
       manifold: the ``GeneralizedStiefel`` or ``stiefel.Product``; rtol, atol: the gradient-norm stopping test.
       hessian: ``"exact"`` (autodiff) or ``"fd"`` (finite differences of the gradient).
-      preconditioner: None or ``Y ↦ PY`` (P SPD); not with a ``Product`` (``ParameterError``).
+      preconditioner: None, ``Y ↦ PY`` (P SPD) or a ``stiefel.PointPreconditioner`` (``P_X`` at each outer
+        iterate: the inner CG and the trust-region norm of that iteration use it); not with a ``Product``
+        (``ParameterError``).
       radius: initial ``Δ0 > 0`` (default ``max_radius/8``); max_radius: ``Δ̄ > 0`` (default the manifold's
         ``typical_dist``, ``√k`` on S_M, Manopt's); min_radius: the collapse threshold (default
         ``10⁻¹²·max_radius``).
@@ -201,7 +204,7 @@ class RiemannianTrustRegion(optx.AbstractMinimiser):
         return fd, 0, 1
 
     def _precondition(self, X):
-        P = self.preconditioner
+        P = at_point(self.preconditioner, X)
         if P is None:
             return None
         S = self.manifold
