@@ -37,6 +37,7 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
     "thesis": ("bench.thesis.report", "the thesis reproduced claim by claim -> docs/THESIS.md (issue 20; --quick)"),
     "admm-rho": ("bench.admm_rho", "ADMM's penalty rho: increase-only vs two-way balancing, both variants, full and fast; per-step ms"),
     "saddle": ("bench.saddle", "saddle checks: block with and without them against ADMM, θ of each check (issue 18)"),
+    "tails": ("bench.tails", "slow tails: time to within 1e-3 of the final objective vs after it, stall stop vs trust-region polish (issue 18)"),
     "peers": ("bench.peers", "per-iteration cost of Riemannian CG: ours (each retraction) vs pymanopt (issue 18)"),
     "render-cost": ("bench.render_cost", "PNG contact sheet: former vs current renderer, seconds per sheet (k = 10)"),
 }

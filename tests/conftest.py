@@ -30,3 +30,16 @@ def _release_compiled_programs():
     yield
     jax.clear_caches()
     gc.collect()
+
+
+# The heaviest modules first (longest-first packing onto the xdist workers, pyproject.toml: with whole
+# modules per worker, a heavy module collected last would leave the other worker idle at the end).
+_HEAVY_FIRST = ["test_notebooks.py", "test_implicit.py", "test_cmm.py", "test_readme.py", "test_cmm_solvers.py",
+                "test_cli.py", "test_parameters.py", "test_trust_region.py", "test_geodesics.py",
+                "test_differentiable_cmm.py", "test_block_solver.py", "test_cli_options.py", "test_optx_solvers.py",
+                "test_precision.py"]
+
+
+def pytest_collection_modifyitems(config, items):
+    rank = {name: i for i, name in enumerate(_HEAVY_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # stable: the order within a module kept

@@ -49,7 +49,8 @@ def test_bench_meshes_resolve_without_shared(tmp_path, monkeypatch):
 def test_tiny_suite_writes_consistent_results(tmp_path):
     out_json, out_md = tmp_path / "suite.json", tmp_path / "suite.md"
     methods = ["block-cg-cholesky", "block-bb-cholesky", "admm", "fast", "eigsh", "block-cg-mu0"]
-    rc = dispatcher.main(["suite", "-k", "3",  # the default mesh: example:starfish, no file needed "--repeats", "1", "--max-iters", "25",
+    # the default mesh: example:starfish, no file needed
+    rc = dispatcher.main(["suite", "-k", "3", "--repeats", "1", "--max-iters", "25",
                           "--admm-iters", "40", "--fast-samples", "40", "--methods", *methods,
                           "--out-json", str(out_json), "--out-md", str(out_md)])
     assert rc == 0
@@ -159,3 +160,12 @@ def test_finish_bench_manpg_tiny(tmp_path):
         assert fin["orthogonality"] < 1e-12
     assert all(r["exact_zeros"] > 0.5 for r in rows if r["method"] == "block + finish")
     assert "| block + finish |" in out.read_text()
+
+
+def test_tail_times_split_at_the_first_time_within_1e3_of_the_final_value():
+    from bench.tails import tail_times  # noqa: PLC0415
+
+    times = np.array([0.0, 1.0, 2.0, 3.0, 10.0])
+    values = np.array([2000.0, 1010.0, 1000.9, 1000.5, 1000.0])  # 1000.9 is the first within 1e-3 of 1000
+    assert tail_times(times, values) == (2.0, 8.0)
+    assert tail_times(np.array([0.0, 4.0]), np.array([5.0, 5.0])) == (0.0, 4.0)

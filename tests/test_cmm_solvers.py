@@ -78,7 +78,8 @@ def test_each_solver_rejects_bad_options_on_construction(demo, make, match):
 FIELDS = {
     BlockCMM: {"smoothing", "eps", "delta", "gtol", "ftol", "max_iters", "continuation", "continuation_start",
                "stage_ftol", "stage_window", "optimizer", "preconditioner", "preconditioner_shift", "refresh",
-               "runtime_smoothing", "bucket_growth", "saddle_checks", "saddle_ftol", "saddle_tol"},
+               "runtime_smoothing", "bucket_growth", "saddle_checks", "saddle_ftol", "saddle_tol", "polish",
+               "polish_gtol", "polish_iters"},
     SequentialCMM: {"smoothing", "eps", "delta", "gtol", "max_iters", "continuation", "continuation_start",
                     "preconditioner_shift", "runtime_smoothing"},
     ADMMCMM: {"rho", "adapt_rho", "rho_ratio", "rho_tau", "adapt_every", "eps_abs", "eps_rel", "max_iters",

@@ -105,6 +105,7 @@ def _run(tmp_path, cache, m, smoothing="f6", *extra):
     return json.loads(p.stdout.strip().splitlines()[-1])
 
 
+@pytest.mark.slow  # six processes (~40 s); test_buckets checks the loading of stored programs in the default run
 def test_stored_programs_serve_new_processes_with_the_same_answer(tmp_path):
     cache = tmp_path / "cache"
     plain = _run(tmp_path, "-", 8)  # no cache: traced as usual

@@ -61,6 +61,7 @@ def test_context_falls_back_to_the_shipped_stand_in():
     assert m.n_vertices > 0 and label == "example:torus (stand-in for no_such_mesh.off)"
 
 
+@pytest.mark.slow  # ~45 s: a benchmark's report (python -m bench thesis --quick); the parts have fast tests here
 def test_quick_report_runs_every_chapter(tmp_path):
     """``python -m bench thesis --quick``: every chapter module measures its claims (no error row), every claim
     has a verdict and a setting, and every figure the report links exists."""
