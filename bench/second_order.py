@@ -338,11 +338,11 @@ def report(rows: list[dict], meta: dict) -> str:
              "starts on a plateau — the CMM stop ends there at F = 1801.6 while the stage's minimum is 1713.94 — and "
              "trust regions alone crawl across it (TR + P: ~9000 iterations; L-BFGS + P comes within 1e-6 of the "
              "minimum in ~2400); after 2500 L-BFGS iterations TR + P finished in 65. There trust regions are a finish, "
-             "not a replacement", "",
+             "not a replacement",
              "* P_X (CMM only): the point preconditioner of `objectives.cmm_newton` — entries pinned in the "
              "smoothing's kink (curvature μw_i s'' > σa_i) inverted by their own curvature, the free ones by P",
              *([f"* problems not rerun by this command: from {meta['earlier']['date']}, command "
-                f"`{meta['earlier']['command']}`"] if meta.get("earlier") else []),
+                f"`{meta['earlier']['command']}`"] if meta.get("earlier") else []), "",
              "![gradient norm per iteration](second_order_convergence.png)", ""]
     for name in dict.fromkeys(r["problem"] for r in rows):
         group = [r for r in rows if r["problem"] == name]
