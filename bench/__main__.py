@@ -21,6 +21,7 @@ from typing import Sequence
 BENCHMARKS: dict[str, tuple[str, str]] = {
     "suite": ("bench.suite", "all CMM solvers side by side on one mesh: time, time-to-target, memory"),
     "scaling": ("bench.scaling", "subdivided surfaces up to ~1e6 vertices: assembly, eigsh, ms/iteration, exponents"),
+    "scaling-modes": ("bench.scaling_modes", "the default CMM solve (stiefel modes) on subdivided meshes up to ~10⁶ vertices: total vs eigsh, peak RSS (issue 18)"),
     "stiefel": ("bench.bench_stiefel", "manifold layer, mu = 0 on grid Laplacians (issue 2)"),
     "mesh": ("bench.bench_mesh", "mesh layer: load, Laplacian assembly, eigenbasis, W @ X (issue 3)"),
     "cmm": ("bench.bench_cmm", "block manifold solver vs ADMM on the shared meshes (issue 4)"),

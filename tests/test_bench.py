@@ -169,3 +169,17 @@ def test_tail_times_split_at_the_first_time_within_1e3_of_the_final_value():
     values = np.array([2000.0, 1010.0, 1000.9, 1000.5, 1000.0])  # 1000.9 is the first within 1e-3 of 1000
     assert tail_times(times, values) == (2.0, 8.0)
     assert tail_times(np.array([0.0, 4.0]), np.array([5.0, 5.0])) == (0.0, 4.0)
+
+
+def test_scaling_modes_report_lists_every_level():
+    from bench.scaling_modes import report  # noqa: PLC0415
+
+    meta = {"date": "d", "machine": "m", "command": "c", "jax": "j", "scipy": "s", "numpy": "n", "base": "bunny.off",
+            "k": 10}
+    rows = [{"level": 2, "n": 55730, "k": 10, "eigsh_seconds": 0.7, "seconds": 25.5, "compile_seconds": 4.8,
+             "ratio_to_eigsh": 41.0, "t_near": None, "iterations": 311, "status": "converged", "objective": 1389.4,
+             "peak_rss_gib": 1.2},
+            {"level": 4, "error": "not finished within 1800 s"}]
+    text = report(rows, meta)
+    assert "| 55730 | 0.7 | 25.5 | 4.8 | 41.0 | – | 311 | converged | 1389.4000 | 1.20 |" in text
+    assert "| level 4 |" in text and "not finished within 1800 s" in text
