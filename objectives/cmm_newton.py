@@ -15,7 +15,10 @@ the two blocks apart, dropping the coupling through W between them:
 
 (both terms positive semi-definite, their sum positive definite; ``D/2`` matches ``K``'s scale, half the
 Hessian's ``2W``). One sparse solve per application, as for ``K⁻¹``, and no factorisation per point: the
-free block reuses the factor of ``K``.
+free block reuses the factor of ``K``. ``objectives.active_set`` splits the entries the same way for the
+first-order solver, but factors the free rows of each column on the host and is refreshed between rounds
+of iterations; trust regions need ``P_X`` at every outer iterate inside the compiled loop, hence this
+cheaper, jittable form (it keeps K's coupling of free and pinned rows in the free block).
 
 ``polish`` runs ``stiefel.RiemannianTrustRegion`` with it from the block solver's last iterate to a relative
 gradient norm (Riemannian, A-metric) ``≤ gtol·|F|``: quadratic convergence where first-order solvers crawl.
