@@ -2,6 +2,7 @@
 
     python -m bench scaling-modes                                  # example:bumpy, levels 1–2 (no files needed)
     python -m bench scaling-modes --base bunny.off --levels 2 3 4  # 5.6·10⁴, 2.2·10⁵, 8.9·10⁵ vertices
+    python -m bench scaling-modes --base armadillo_25479.obj --levels 1 2 3 --merge   # 1.0·10⁵ … 1.6·10⁶, added
 
 Each level runs in its own process (its peak RSS is that process's ``ru_maxrss``, the Python/JAX runtime
 included): cotangent Laplacian, ``eigsh`` for the first max(k, 2) pairs (timed: the reference of the
@@ -10,7 +11,8 @@ goal "total ≤ 20× eigsh"), then ``compressed_modes(lap, k, 2λ_(k−1))`` wit
 solve seconds (compile apart), iterations, status, t₁ (seconds until the true objective is within 1e-3,
 relative, of the final one), the ratio of solve (+ compile) to eigsh, and peak RSS. A level that does not
 finish within ``--timeout`` seconds is reported as such. Subdivided meshes are cached as in
-``bench.scaling``. Writes ``bench/RESULTS_scaling_modes.md`` and ``bench/results_scaling_modes.json``.
+``bench.scaling``. Writes ``bench/RESULTS_scaling_modes.md`` and ``bench/results_scaling_modes.json``; with
+``--merge`` the rows already there for other (mesh, level) pairs are kept (each row names its mesh, date and command).
 """
 
 from __future__ import annotations
@@ -66,19 +68,21 @@ def report(rows: list[dict], meta: dict) -> str:
     from bench.environment import header_lines  # noqa: PLC0415
 
     lines = ["# The default CMM solve at scale", "", *header_lines(meta),
-             f"* mesh: `{meta['base']}` midpoint-subdivided; k = {meta['k']}, μ = 2λ_(k−1), area weights, "
+             f"* meshes: midpoint-subdivided (the base mesh and the date of its run in each row); k = {meta['k']}, "
+             "μ = 2λ_(k−1), area weights, "
              "`BlockCMM()` defaults (the CLI's), eigenbasis start; one process per level",
              "* eigsh: the first max(k, 2) pairs (shift-invert, the start and σ); total / eigsh: (solve + compile) "
              "seconds over eigsh's; t₁: seconds until the true objective is within 1e-3 of the final one; "
              "goal (issue 18, item 6): total ≤ 20× eigsh, ≤ 16 GB at 10⁶ vertices", "",
-             "| n | eigsh s | solve s | compile s | total / eigsh | t₁ s | iterations | status | objective | "
-             "peak RSS GiB |", "|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|"]
+             "| mesh (level) | run | n | eigsh s | solve s | compile s | total / eigsh | t₁ s | iterations | status | "
+             "objective | peak RSS GiB |", "|---|---|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|"]
     for r in rows:
+        head = f"| {r.get('base', meta['base'])} ({r['level']}) | {r.get('date', meta['date'])} "
         if "error" in r:
-            lines.append(f"| level {r['level']} | – | – | – | – | – | – | {r['error']} | – | – |")
+            lines.append(head + f"| – | – | – | – | – | – | – | {r['error']} | – | – |")
             continue
         t1 = "–" if r["t_near"] is None else f"{r['t_near']:.1f}"
-        lines.append(f"| {r['n']} | {r['eigsh_seconds']:.1f} | {r['seconds']:.1f} | {r['compile_seconds']:.1f} | "
+        lines.append(head + f"| {r['n']} | {r['eigsh_seconds']:.1f} | {r['seconds']:.1f} | {r['compile_seconds']:.1f} | "
                      f"{r['ratio_to_eigsh']:.1f} | {t1} | {r['iterations']} | {r['status']} | {r['objective']:.4f} | "
                      f"{r['peak_rss_gib']:.2f} |")
     return "\n".join(lines) + "\n"
@@ -95,6 +99,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--cache", default=str(default_cache()))
     p.add_argument("--out-json", type=Path, default=ROOT / "bench" / "results_scaling_modes.json")
     p.add_argument("--out-md", type=Path, default=ROOT / "bench" / "RESULTS_scaling_modes.md")
+    p.add_argument("--merge", action="store_true",
+                   help="keep the rows of --out-json for other (mesh, level) pairs (their own date and command)")
     p.add_argument("--worker", type=int, default=None, help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     if args.worker is not None:
@@ -102,6 +108,16 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     from bench.environment import run_meta, write_results  # noqa: PLC0415
 
+    meta = run_meta("bench scaling-modes", argv, base=args.base, k=args.k)
+    kept = []
+    if args.merge and args.out_json.is_file():
+        old = json.loads(args.out_json.read_text())
+        for r in old["rows"]:  # rows from before --merge existed carry their run's base, date and command in meta
+            r.setdefault("base", old["meta"]["base"])
+            r.setdefault("date", old["meta"]["date"])
+            r.setdefault("command", old["meta"]["command"])
+            if (r["base"], r["level"]) not in {(args.base, lv) for lv in args.levels}:
+                kept.append(r)
     rows = []
     for level in args.levels:
         cmd = [sys.executable, "-m", "bench.scaling_modes", "--worker", str(level), "--base", args.base,
@@ -115,9 +131,10 @@ def main(argv: list[str] | None = None) -> int:
                 row = {"level": level, "error": tail[0][-200:]}
         except subprocess.TimeoutExpired:
             row = {"level": level, "error": f"not finished within {args.timeout:.0f} s"}
+        row.update(base=args.base, date=meta["date"], command=meta["command"])
         print(json.dumps(row), flush=True)
         rows.append(row)
-    meta = run_meta("bench scaling-modes", argv, base=args.base, k=args.k)
+    rows = sorted(kept + rows, key=lambda r: (r.get("n", 0), r["base"]))
     write_results(args.out_json, args.out_md, meta, rows, report(rows, meta))
     return 0
 

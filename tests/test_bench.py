@@ -48,37 +48,58 @@ def test_bench_meshes_resolve_without_shared(tmp_path, monkeypatch):
 
 def test_tiny_suite_writes_consistent_results(tmp_path):
     out_json, out_md = tmp_path / "suite.json", tmp_path / "suite.md"
-    methods = ["block-cg-cholesky", "block-bb-cholesky", "admm", "fast", "eigsh", "block-cg-mu0"]
-    # the default mesh: example:starfish, no file needed
-    rc = dispatcher.main(["suite", "-k", "3", "--repeats", "1", "--max-iters", "25",
-                          "--admm-iters", "40", "--fast-samples", "40", "--methods", *methods,
-                          "--out-json", str(out_json), "--out-md", str(out_md)])
+    methods = ["block-cg-cholesky", "block-bb-cholesky", "block-default-finish", "admm", "fast", "penalty", "eigsh",
+               "block-cg-mu0"]
+    # the default mesh: example:starfish, no file needed; a rejected mesh is listed with its error; one ManPG case
+    bad = tmp_path / "two_faces_one_edge.obj"
+    bad.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 -1 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\nf 1 2 5\n")
+    rc = dispatcher.main(["suite", "--mesh", "example:starfish", str(bad), "--manpg", "48", "--manpg-r", "4",
+                          "--manpg-mu", "0.3", "-k", "3", "--repeats", "1", "--max-iters", "25", "--admm-iters", "40",
+                          "--fast-samples", "40", "--methods", *methods, "--out-json", str(out_json),
+                          "--out-md", str(out_md)])
     assert rc == 0
     res = json.loads(out_json.read_text())
-    meta, setup, rows = res["meta"], res["setup"], res["rows"]
+    meta, problems = res["meta"], res["problems"]
     assert meta["jax_backend"] and meta["device"] and meta["versions"]["jax"]
     assert meta["command"].startswith("python -m bench suite")
-    assert setup["n"] == 2562 and setup["k"] == 3
-    assert list(rows) == methods
-    for name, r in rows.items():
-        assert np.isfinite(r["objective"]) and r["wall_time"] >= 0 and r["compile_time"] >= 0
-        assert r["orthogonality"] < 1e-8, name  # every method returns A-orthonormal modes
-        assert r["tracemalloc_peak_bytes"] > 0
-        t, f = np.asarray(r["curve"]["time"]), np.asarray(r["curve"]["objective"])
-        assert t.size == f.size >= 1 and np.all(np.diff(t) >= 0)
-    # the target is the best objective seen over the μ > 0 methods: nobody ends below it
-    target = setup["target_objective"]
-    for name in methods[:4]:
-        assert rows[name]["objective"] >= target * (1 - 1e-12)
-    # at μ = 0, Σλ (eigsh) is the minimum of tr(XᵀWX) over XᵀAX = I (Ky Fan): the solver cannot beat it
-    ref = rows["eigsh"]["objective"]
-    assert setup["mu0_reference"] == ref
-    assert rows["block-cg-mu0"]["objective"] >= ref * (1 - 1e-10)
-    assert rows["block-cg-mu0"]["objective"] <= ref * (1 + 1e-3)  # and gets close within 25 iterations
+    assert [p["setup"]["problem"] for p in problems] == ["example:starfish", str(bad), "ManPG n = 48, r = 4, μ = 0.3"]
+    assert "NonManifoldError" in problems[1]["error"] and problems[1]["rows"] == {}
+    star, manpg = problems[0], problems[2]
+    assert star["setup"]["n"] == 2562 and star["setup"]["k"] == 3 and list(star["rows"]) == methods
+    assert manpg["setup"]["n"] == 48 and manpg["setup"]["k"] == 4 and manpg["setup"]["start"] == "random"
+    assert list(manpg["rows"]) == [m for m in methods if m != "fast"]  # the fast approximation needs a surface
+    for prob in (star, manpg):
+        setup, rows = prob["setup"], prob["rows"]
+        for name, r in rows.items():
+            assert np.isfinite(r["objective"]) and r["wall_time"] >= 0 and r["compile_time"] >= 0
+            assert r["orthogonality"] < 1e-8, name  # every method returns A-orthonormal modes
+            assert r["smoothed_objective"] <= r["objective"] + 1e-9 * abs(r["objective"]), name  # Huber ≤ |x|
+            assert len(r["support_sizes"]) == setup["k"] and 0.0 <= r["exact_zeros"] < 1.0
+            t, f = np.asarray(r["curve"]["time"]), np.asarray(r["curve"]["objective"])
+            assert t.size == f.size >= 1 and np.all(np.diff(t) >= 0)
+        # the target is the best objective seen over the μ > 0 methods: nobody ends below it
+        for name in ("block-cg-cholesky", "block-bb-cholesky", "block-default-finish", "admm", "penalty"):
+            assert rows[name]["objective"] >= setup["target_objective"] * (1 - 1e-12)
+            assert rows[name]["vs_admm"] == pytest.approx(rows[name]["objective"] / rows["admm"]["objective"] - 1)
+        assert rows["admm"]["speed_vs_admm"] == pytest.approx(1.0)
+        # the finish returns exact zeros, an exact-ℓ1 residual far below the smooth modes', and counts them per mode
+        fin = rows["block-default-finish"]
+        assert fin["exact_zeros"] > 0.0 and fin["l1_residual"] < rows["block-cg-cholesky"]["l1_residual"]
+        assert sum(fin["support_sizes"]) == round((1 - fin["exact_zeros"]) * setup["n"] * setup["k"])
+        # at μ = 0, Σλ (eigsh) is the minimum of tr(XᵀWX) over XᵀAX = I (Ky Fan): the solver cannot beat it
+        ref = rows["eigsh"]["objective"]
+        assert setup["mu0_reference"] == ref and rows["eigsh"]["l1_residual"] is None
+        assert rows["block-cg-mu0"]["objective"] >= ref * (1 - 1e-10)
+        assert rows["block-cg-mu0"]["objective"] <= ref * (1 + 1e-3)  # and gets close within 25 iterations
     md = out_md.read_text()
     assert "example:starfish" in md and "no GPU" in md or meta["gpu"]
+    assert "## Summary" in md and "not run: NonManifoldError" in md and "### ManPG n = 48, r = 4, μ = 0.3" in md
     for name in methods:
         assert f"| {name}" in md
+    # --render rebuilds the same report from the JSON
+    again = tmp_path / "again.md"
+    assert dispatcher.main(["suite", "--render", str(out_json), "--out-md", str(again)]) == 0
+    assert again.read_text() == md
 
 
 def test_cmm_bench_tables_for_random_starts_and_reference():
@@ -179,7 +200,36 @@ def test_scaling_modes_report_lists_every_level():
     rows = [{"level": 2, "n": 55730, "k": 10, "eigsh_seconds": 0.7, "seconds": 25.5, "compile_seconds": 4.8,
              "ratio_to_eigsh": 41.0, "t_near": None, "iterations": 311, "status": "converged", "objective": 1389.4,
              "peak_rss_gib": 1.2},
-            {"level": 4, "error": "not finished within 1800 s"}]
+            {"level": 4, "error": "not finished within 1800 s"},
+            {"level": 3, "base": "armadillo_25479.obj", "date": "e", "n": 1630000, "k": 10, "eigsh_seconds": 40.0,
+             "seconds": 900.0, "compile_seconds": 5.0, "ratio_to_eigsh": 22.6, "t_near": 200.0, "iterations": 300,
+             "status": "converged", "objective": 1000.0, "peak_rss_gib": 8.0}]
     text = report(rows, meta)
-    assert "| 55730 | 0.7 | 25.5 | 4.8 | 41.0 | – | 311 | converged | 1389.4000 | 1.20 |" in text
-    assert "| level 4 |" in text and "not finished within 1800 s" in text
+    assert "| bunny.off (2) | d | 55730 | 0.7 | 25.5 | 4.8 | 41.0 | – | 311 | converged | 1389.4000 | 1.20 |" in text
+    assert "| bunny.off (4) | d | – |" in text and "not finished within 1800 s" in text
+    assert "| armadillo_25479.obj (3) | e | 1630000 | 40.0 | 900.0 | 5.0 | 22.6 | 200.0 | 300 |" in text
+
+
+def test_scaling_modes_merge_keeps_other_rows(tmp_path, monkeypatch):
+    """``--merge`` keeps the rows of other (mesh, level) pairs, with the date and command of their own run."""
+    from bench import scaling_modes  # noqa: PLC0415
+
+    out_json, out_md = tmp_path / "r.json", tmp_path / "r.md"
+    old_row = {"level": 4, "n": 891650, "k": 10, "eigsh_seconds": 21.7, "seconds": 730.5, "compile_seconds": 5.1,
+               "ratio_to_eigsh": 34.0, "t_near": 165.2, "iterations": 343, "status": "converged", "objective": 1389.3,
+               "peak_rss_gib": 4.34}
+    out_json.write_text(json.dumps({"meta": {"base": "bunny.off", "date": "2026-11-26 09:39 UTC",
+                                             "command": "python -m bench scaling-modes --base bunny.off"},
+                                    "rows": [old_row, dict(old_row, level=1, n=100)]}))
+
+    class Done:
+        returncode, stderr = 0, ""
+        stdout = json.dumps(dict(old_row, level=1, n=100, seconds=1.0))
+
+    monkeypatch.setattr(scaling_modes.subprocess, "run", lambda *a, **k: Done())
+    assert scaling_modes.main(["--base", "bunny.off", "--levels", "1", "--merge", "--out-json", str(out_json),
+                               "--out-md", str(out_md)]) == 0
+    rows = json.loads(out_json.read_text())["rows"]
+    assert [(r["level"], r["seconds"]) for r in rows] == [(1, 1.0), (4, 730.5)]  # level 1 replaced, level 4 kept
+    assert rows[1]["date"] == "2026-11-26 09:39 UTC" and rows[1]["command"].endswith("--base bunny.off")
+    assert "| bunny.off (4) | 2026-11-26 09:39 UTC | 891650 |" in out_md.read_text()
