@@ -123,21 +123,26 @@ def run_problem(pb: Problem, args) -> dict:
         print(json.dumps({"problem": pb.label, "method": meth, **{k: row[k] for k in (
             "wall_time", "compile_time", "iterations", "objective", "exact_zeros", "orthogonality", "status")}}),
             flush=True)
-    pos = [r for mth, r in rows.items() if mth not in MU0]
+    pos = [r for mth, r in rows.items() if mth not in MU0 and not r.get("failed")]
     target = min([min(np.nanmin(np.asarray(c[1], dtype=float)) for c in r["_curves"]) for r in pos]
                  + [r["objective"] for r in pos]) if pos else None
     ref0 = rows["eigsh"]["objective"] if "eigsh" in rows else None
     admm = rows.get("admm")
     for mth, r in rows.items():
         tgt = ref0 if mth in MU0 else target
-        ts = [first_time_within(c[0], c[1], tgt) for c in r.pop("_curves")] if tgt is not None else []
+        curves = r.pop("_curves")
+        if r.get("failed"):
+            r.update(target=tgt, time_to_target=None, time_to_target_runs=[], relative_gap=None,
+                     curve={"time": [], "objective": []})
+            continue
+        ts = [first_time_within(c[0], c[1], tgt) for c in curves] if tgt is not None else []
         ok = [t for t in ts if t is not None]
         r["target"] = tgt
         r["time_to_target"] = float(np.median(ok)) if ok and len(ok) == len(ts) else None
         r["time_to_target_runs"] = ts
         r["relative_gap"] = (r["objective"] - tgt) / abs(tgt) if tgt else None
         r["curve"] = _downsample(*r["curve"])
-        if admm is not None and mth not in MU0:
+        if admm is not None and not admm.get("failed") and mth not in MU0:
             r["vs_admm"] = r["objective"] / admm["objective"] - 1.0
             r["speed_vs_admm"] = admm["wall_time"] / r["wall_time"] if r["wall_time"] > 0 else None
             total = r["wall_time"] + r["compile_time"]
@@ -150,7 +155,8 @@ def run_problem(pb: Problem, args) -> dict:
     return {"setup": setup, "rows": rows}
 
 
-def run_suite(args) -> list[dict]:
+def run_suite(args, save=None) -> list[dict]:
+    """Every problem in turn; ``save(results so far)`` after each (an interrupted run keeps the finished ones)."""
     out = []
     for label, build in problems(args):
         try:
@@ -160,6 +166,8 @@ def run_suite(args) -> list[dict]:
             print(json.dumps({"problem": label, "error": out[-1]["error"]}), flush=True)
             continue
         out.append(run_problem(pb, args))
+        if save is not None:
+            save(out)
     return out
 
 
@@ -207,7 +215,7 @@ def summary_table(results: list[dict]) -> list[str]:
             out.append(f"| {s['problem']} | – | – | – | – | – | – | – | – | not run: {res['error']} |")
             continue
         admm, dflt, fin = rows.get("admm"), rows.get("block-default"), rows.get("block-default-finish")
-        pos = {m: r for m, r in rows.items() if m not in MU0}
+        pos = {m: r for m, r in rows.items() if m not in MU0 and not r.get("failed")}
         best = min(pos, key=lambda m: pos[m]["objective"]) if pos else None
         zeros = f"{_f(fin and fin['exact_zeros'], '{:.3f}')} / {_f(admm and admm['exact_zeros'], '{:.3f}')}"
         speed = (f"{_x(dflt.get('speed_vs_admm'))} / {_x(dflt.get('speed_vs_admm_with_compile'))}" if dflt else "–")
@@ -312,11 +320,20 @@ def main(argv=None):
     p.add_argument("--no-memory", action="store_true", help="skip the extra tracemalloc run per method")
     p.add_argument("--out-json", default=str(HERE / "results_suite.json"))
     p.add_argument("--out-md", default=str(HERE / "RESULTS_suite.md"))
-    p.add_argument("--render", default=None, help="only re-render --out-md from this results JSON")
+    p.add_argument("--render", nargs="+", default=None, metavar="JSON",
+                   help="only re-render --out-md from these results JSONs (several: also combined into --out-json)")
     args = p.parse_args(argv)
-    if args.render:  # re-render the markdown from a results JSON
-        saved = json.loads(Path(args.render).read_text())
-        write_atomic(Path(args.out_md), markdown(saved["meta"], saved["problems"], argparse.Namespace(**saved["params"])))
+    if args.render:  # re-render the markdown from results JSONs (several: their problems in turn, the first's recipe)
+        saved = [json.loads(Path(f).read_text()) for f in args.render]
+        meta = dict(saved[0]["meta"])
+        if len(saved) > 1:
+            meta["command"] = " ; ".join(s["meta"]["command"] for s in saved)
+        problems_ = [p for s in saved for p in s["problems"]]
+        shown = argparse.Namespace(**saved[0]["params"])
+        if len(saved) > 1:
+            write_atomic(Path(args.out_json), json.dumps({"meta": meta, "params": saved[0]["params"],
+                                                          "problems": problems_}, indent=1, default=float))
+        write_atomic(Path(args.out_md), markdown(meta, problems_, shown))
         return 0
     if args.repeats < 1:
         p.error("--repeats must be ≥ 1")
@@ -327,12 +344,17 @@ def main(argv=None):
         meshes = ["example:starfish"]
     args.mesh = meshes
     meta = metadata(argv)
-    results = run_suite(args)
     params = {k: v for k, v in vars(args).items() if k not in ("out_json", "out_md", "render")}
-    write_atomic(Path(args.out_json), json.dumps({"meta": meta, "params": params, "problems": results}, indent=1,
-                                                 default=float))
-    md = markdown(meta, results, args)
-    write_atomic(Path(args.out_md), md)
+
+    def save(results):
+        write_atomic(Path(args.out_json), json.dumps({"meta": meta, "params": params, "problems": results}, indent=1,
+                                                     default=float))
+        md = markdown(meta, results, args)
+        write_atomic(Path(args.out_md), md)
+        return md
+
+    results = run_suite(args, save)
+    md = save(results)
     print(md)
     return 0
 

@@ -43,6 +43,10 @@ class PenaltyResult(eqx.Module):
       rho: ``(stages,)`` the penalty weights used.
       stats: ``n_fevals``, ``n_gevals`` (value and gradient evaluations), ``n_linesearch_failed`` (stages).
       wall_time: seconds for the compiled solve; compile_time: seconds to trace and compile it.
+      status: ``"converged"`` (the last stage's ‖∇P_ρ‖_F ≤ tol), ``"non_finite"`` (x or its value is not
+      finite: ρ too small for F's curvature lets the columns collapse, or the line search blew up),
+      ``"line_search_failed"`` (a stage's line search failed and the last stage did not converge) or
+      ``"max_iters"``.
     """
 
     x: Float[Array, "n k"]
@@ -56,6 +60,16 @@ class PenaltyResult(eqx.Module):
     stats: dict
     wall_time: float = 0.0
     compile_time: float = 0.0
+    status: str = eqx.field(static=True, default="converged")
+
+
+def _status(X, value, gnorm, failed, tol) -> str:
+    """The outcome, from the host values of the solve (see ``PenaltyResult.status``)."""
+    if not (np.all(np.isfinite(np.asarray(X))) and np.isfinite(float(value))):
+        return "non_finite"
+    if float(gnorm) <= tol:
+        return "converged"
+    return "line_search_failed" if int(failed) > 0 else "max_iters"
 
 
 def _penalised(fn, op, with_args):
@@ -111,7 +125,7 @@ def penalty_minimize(fn: Callable, manifold: GeneralizedStiefel, X0, *, args: An
 
     Returns:
       ``PenaltyResult`` (``x, value, constraint_violation_before_projection, constraint_violation,
-      iterations, stage_iterations, grad_norm, rho, stats, wall_time, compile_time``).
+      iterations, stage_iterations, grad_norm, rho, stats, wall_time, compile_time, status``).
     """
     if not isinstance(manifold, GeneralizedStiefel):
         raise StiefelError("manifold must be a stiefel.GeneralizedStiefel")
@@ -134,4 +148,5 @@ def penalty_minimize(fn: Callable, manifold: GeneralizedStiefel, X0, *, args: An
     return PenaltyResult(x=X, value=value, constraint_violation_before_projection=before,
                          constraint_violation=after, iterations=jnp.sum(its), stage_iterations=its,
                          grad_norm=gnorm, rho=rho_arr, stats={k: np.asarray(v) for k, v in stats.items()},
-                         wall_time=t_run, compile_time=t_compile)
+                         wall_time=t_run, compile_time=t_compile,
+                         status=_status(X, value, gnorm, stats["n_linesearch_failed"], tol))

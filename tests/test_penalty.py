@@ -50,7 +50,7 @@ def test_projected_penalty_solution_reaches_the_optimum():
     assert abs(gap) <= 1e-9, gap
     assert float(res.constraint_violation) <= 1e-10
     assert float(res.constraint_violation_before_projection) > 1e-2  # the projection did the work
-    assert float(res.grad_norm) <= 1e-9 and int(res.iterations) < 3000
+    assert float(res.grad_norm) <= 1e-9 and int(res.iterations) < 3000 and res.status == "converged"
     assert np.isclose(float(brockett(res.x)), float(res.value))
     assert res.wall_time > 0 and res.compile_time >= 0
 
@@ -79,6 +79,16 @@ def test_args_are_traced_and_continuation_warm_starts():
     res2 = stiefel.penalty_minimize(brockett_args, S, X0, args=(2.0 * _Wj, _Dj), rho=rhos, maxiter=3000, tol=1e-9)
     assert res2.compile_time < 0.5 * res.compile_time
     assert abs(float(res2.value) - 2 * OPT) / OPT <= 1e-9
+
+
+def test_status_never_claims_convergence():
+    """Too few iterations: max_iters (or a failed line search), never converged; an objective that is NaN
+    (here from the start: the square root of a negative number): non_finite."""
+    short = stiefel.penalty_minimize(brockett, S, X0, rho=10.0, maxiter=5, tol=1e-9)
+    assert short.status in ("max_iters", "line_search_failed") and float(short.grad_norm) > 1e-9
+    broken = stiefel.penalty_minimize(lambda X: brockett(X) + jnp.sqrt(X[0, 0] - 10.0), S, X0, rho=10.0,
+                                      maxiter=20, tol=1e-9)
+    assert not np.isfinite(float(broken.value)) and broken.status == "non_finite"
 
 
 @pytest.mark.parametrize("kw, error", [
