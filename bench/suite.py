@@ -27,7 +27,8 @@ high-water increase (reset through ``/proc/self/clear_refs``; XLA buffers includ
     python -m bench suite --all-shared --manpg 128 512 2048 8192 --repeats 1 --no-memory
 
 A mesh that cannot be loaded (e.g. rejected bad input) is listed with its error. Writes ``bench/results_suite.json``
-and ``bench/RESULTS_suite.md`` (atomically); on a GPU machine the JAX parts run there (see ``bench/GPU.md``).
+and ``bench/RESULTS_suite.md`` (atomically, after every problem; notes below a ``<!-- notes -->`` line of the existing
+file are kept); on a GPU machine the JAX parts run there (see ``bench/GPU.md``).
 """
 
 from __future__ import annotations
@@ -292,6 +293,18 @@ def markdown(meta, results, args) -> str:
     return "\n".join(out)
 
 
+NOTES = "<!-- notes -->"
+
+
+def with_notes(md: str, path: Path) -> str:
+    """``md`` followed by the hand-written notes below the ``<!-- notes -->`` line of the existing ``path``."""
+    if path.is_file():
+        old = path.read_text()
+        if NOTES in old:
+            return md.rstrip("\n") + "\n\n" + old[old.index(NOTES):]
+    return md
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--mesh", nargs="*", default=None,
@@ -332,8 +345,8 @@ def main(argv=None):
         shown = argparse.Namespace(**saved[0]["params"])
         if len(saved) > 1:
             write_atomic(Path(args.out_json), json.dumps({"meta": meta, "params": saved[0]["params"],
-                                                          "problems": problems_}, indent=1, default=float))
-        write_atomic(Path(args.out_md), markdown(meta, problems_, shown))
+                                                          "problems": problems_}, default=float))
+        write_atomic(Path(args.out_md), with_notes(markdown(meta, problems_, shown), Path(args.out_md)))
         return 0
     if args.repeats < 1:
         p.error("--repeats must be ≥ 1")
@@ -347,10 +360,10 @@ def main(argv=None):
     params = {k: v for k, v in vars(args).items() if k not in ("out_json", "out_md", "render")}
 
     def save(results):
-        write_atomic(Path(args.out_json), json.dumps({"meta": meta, "params": params, "problems": results}, indent=1,
+        write_atomic(Path(args.out_json), json.dumps({"meta": meta, "params": params, "problems": results},
                                                      default=float))
         md = markdown(meta, results, args)
-        write_atomic(Path(args.out_md), md)
+        write_atomic(Path(args.out_md), with_notes(md, Path(args.out_md)))
         return md
 
     results = run_suite(args, save)

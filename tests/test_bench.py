@@ -96,10 +96,11 @@ def test_tiny_suite_writes_consistent_results(tmp_path):
     assert "## Summary" in md and "not run: NonManifoldError" in md and "### ManPG n = 48, r = 4, μ = 0.3" in md
     for name in methods:
         assert f"| {name}" in md
-    # --render rebuilds the same report from the JSON
+    # --render rebuilds the same report from the JSON, keeping the notes below <!-- notes --> of the old file
     again = tmp_path / "again.md"
+    again.write_text("an old report\n\n<!-- notes -->\n## Reading\n\nkept\n")
     assert dispatcher.main(["suite", "--render", str(out_json), "--out-md", str(again)]) == 0
-    assert again.read_text() == md
+    assert again.read_text() == md.rstrip("\n") + "\n\n<!-- notes -->\n## Reading\n\nkept\n"
 
 
 def test_cmm_bench_tables_for_random_starts_and_reference():
