@@ -237,13 +237,14 @@ def problem_table(res: dict, memory: bool) -> list[str]:
            f"μ = 0 reference (Σλ) = {_f(s['mu0_reference'], '{:.6f}')}", "",
            "| method | its | status | s | to target s | compile s | true objective | smoothed | vs ADMM | zeros "
            "| <1e-6 | support (median) | ℓ1 residual | orth. | speed vs ADMM (excl. / incl. compile) |"
-           + (" tracemalloc MiB | peak-RSS increase MiB |" if memory else ""),
-           "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|" + ("---:|---:|" if memory else "")]
+           + (" tracemalloc MiB | peak-RSS increase MiB | device peak MiB |" if memory else ""),
+           "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|" + ("---:|---:|---:|" if memory else "")]
     for mth, r in rows.items():
         label = mth + (f" (d = {r['d']})" if "d" in r else "")
         sup = int(np.median(r["support_sizes"])) if r.get("support_sizes") else None
         speed = f"{_x(r.get('speed_vs_admm'))} / {_x(r.get('speed_vs_admm_with_compile'))}" if "speed_vs_admm" in r \
             else "–"
+        dev = (r.get("device_memory_after") or {}).get("peak_bytes_in_use")
         line = (f"| {label} | {_f(r['iterations'], '{:d}')} | {r['status']} | {r['wall_time']:.2f} | "
                 f"{_f(r['time_to_target'])} | {r['compile_time']:.2f} | {r['objective']:.6f} | "
                 f"{r['smoothed_objective']:.6f} | {_pct(r.get('vs_admm'))} | {r['exact_zeros']:.3f} | "
@@ -251,7 +252,8 @@ def problem_table(res: dict, memory: bool) -> list[str]:
                 f"{r['orthogonality']:.1e} | {speed} |")
         if memory:
             line += (f" {_f(r.get('tracemalloc_peak_bytes', 0) / mib, '{:.1f}')} | "
-                     f"{_f(r.get('peak_rss_increase_bytes') and r['peak_rss_increase_bytes'] / mib, '{:.1f}')} |")
+                     f"{_f(r.get('peak_rss_increase_bytes') and r['peak_rss_increase_bytes'] / mib, '{:.1f}')} | "
+                     f"{_f(dev and dev / mib, '{:.1f}')} |")
         out.append(line)
     return out + [""]
 

@@ -110,7 +110,7 @@ class Problem:
         return out
 
 
-def _from_minimize(pb: Problem, res, energy) -> dict:
+def _from_minimize(res) -> dict:
     h = res.trimmed_history()
     it = int(res.iterations)
     return {"iterations": it, "status": res.status_name, "wall_time": res.wall_time, "compile_time": res.compile_time,
@@ -125,7 +125,7 @@ def run_block(pb: Problem, name: str) -> dict:
     X0 = manifold.project_to_manifold(jnp.asarray(pb.X0))
     res = stiefel.minimize(pb.energy, manifold, X0, method=method, preconditioner=pb.P, gtol=pb.args.gtol,
                            ftol=pb.args.ftol, max_iters=pb.args.max_iters, monitor=pb.energy.true_value)
-    return _from_minimize(pb, res, pb.energy)
+    return _from_minimize(res)
 
 
 def run_block_mu0(pb: Problem) -> dict:
@@ -134,7 +134,7 @@ def run_block_mu0(pb: Problem) -> dict:
     X0 = manifold.random_point(jax.random.PRNGKey(pb.args.seed))
     res = stiefel.minimize(pb.energy0, manifold, X0, method="cg", preconditioner=pb.P, gtol=pb.args.gtol_mu0,
                            max_iters=pb.args.max_iters, monitor=pb.energy0.true_value)
-    return _from_minimize(pb, res, pb.energy0)
+    return _from_minimize(res)
 
 
 def _from_cmm(res, curve=None) -> dict:

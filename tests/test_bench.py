@@ -75,6 +75,7 @@ def test_tiny_suite_writes_consistent_results(tmp_path):
             assert r["orthogonality"] < 1e-8, name  # every method returns A-orthonormal modes
             assert r["smoothed_objective"] <= r["objective"] + 1e-9 * abs(r["objective"]), name  # Huber ≤ |x|
             assert len(r["support_sizes"]) == setup["k"] and 0.0 <= r["exact_zeros"] < 1.0
+            assert r["tracemalloc_peak_bytes"] > 0  # the memory run (no --no-memory)
             t, f = np.asarray(r["curve"]["time"]), np.asarray(r["curve"]["objective"])
             assert t.size == f.size >= 1 and np.all(np.diff(t) >= 0)
         # the target is the best objective seen over the μ > 0 methods: nobody ends below it
@@ -93,7 +94,7 @@ def test_tiny_suite_writes_consistent_results(tmp_path):
         assert rows["block-cg-mu0"]["objective"] <= ref * (1 + 1e-3)  # and gets close within 25 iterations
     md = out_md.read_text()
     assert "example:starfish" in md and "no GPU" in md or meta["gpu"]
-    assert "## Summary" in md and "not run: NonManifoldError" in md and "### ManPG n = 48, r = 4, μ = 0.3" in md
+    assert "## Summary" in md and "not run: NonManifoldError" in md and "| device peak MiB |" in md and "### ManPG n = 48, r = 4, μ = 0.3" in md
     for name in methods:
         assert f"| {name}" in md
     # --render rebuilds the same report from the JSON, keeping the notes below <!-- notes --> of the old file
