@@ -225,12 +225,13 @@ class BlockCMM(_SmoothedSolver):
       the Hessian's most negative curvature θ (20 LOBPCG products) and, when θ < −``saddle_tol``·σ (σ the
       preconditioner's shift, λ_{k−1} by default), steps off along it and resumes; a passed check moves
       the stage on to ``ftol``, where one more check is made (the last of the budget is kept for that
-      point). The result records each (θ, step, decrease, iteration) in ``params["saddles"]``. Measured on example:bumpy (k = 10, μ = 2λ₉): the stall test had
-      stopped on a saddle's plateau at 1802.50 (θ = −89); with the checks the solve ends within 0.011 % of
-      ADMM's objective (``bench/RESULTS_saddle.md``). ``saddle_ftol`` 1e-5 → 1e-4 (the first check sooner)
-      brought it within 0.1 % of ADMM's objective at iteration 544 instead of 706 (2457 → 1990 in all), the
-      same iteration as before on five other meshes, the same final objectives (torus: lower, 1881.13 for
-      1881.23, in 1915 iterations instead of 646).
+      point). The result records each (θ, step, decrease, iteration) in ``params["saddles"]``. Measured on
+      example:bumpy (k = 10, μ = 2λ₉): the stall test had stopped on a saddle's plateau at 1802.50
+      (θ = −89); with the checks the solve ends within 0.011 % of ADMM's objective
+      (``bench/RESULTS_saddle.md``). ``saddle_ftol`` 1e-5 → 1e-4 (the first check sooner) brought it within
+      0.1 % of ADMM's objective at iteration 544 instead of 706 (2457 → 1990 in all), the same iteration as
+      before on five other meshes, the same final objectives (torus: lower, 1881.13 for 1881.23, in 1915
+      iterations instead of 646).
     polish: None, or ``"tr"``: after a converged last stage, trust regions with the curvature-aware point
       preconditioner (``objectives.cmm_newton``) take the smoothed problem to a Riemannian gradient norm
       ``≤ polish_gtol·|F|`` in at most ``polish_iters`` outer iterations (the first-order stop is a stall
