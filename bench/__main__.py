@@ -19,7 +19,7 @@ from typing import Sequence
 
 # name -> (module, one-line description); descriptions are kept here so that --list imports nothing
 BENCHMARKS: dict[str, tuple[str, str]] = {
-    "suite": ("bench.suite", "all CMM solvers side by side on one mesh: time, time-to-target, memory"),
+    "suite": ("bench.suite", "all CMM solvers side by side on meshes and ManPG's 1-D problem: objective, exact zeros, time, ratios to ADMM"),
     "scaling": ("bench.scaling", "subdivided surfaces up to ~1e6 vertices: assembly, eigsh, ms/iteration, exponents"),
     "scaling-modes": ("bench.scaling_modes", "the default CMM solve (stiefel modes) on subdivided meshes up to ~10⁶ vertices: total vs eigsh, peak RSS (issue 18)"),
     "stiefel": ("bench.bench_stiefel", "manifold layer, mu = 0 on grid Laplacians (issue 2)"),

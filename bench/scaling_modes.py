@@ -29,7 +29,6 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # like the other benches: a shared 2-core machine
 
 ROOT = Path(__file__).resolve().parents[1]
-NEAR = 1e-3
 
 
 def worker(base: str, level: int, k: int, cache: str) -> dict:
@@ -40,6 +39,7 @@ def worker(base: str, level: int, k: int, cache: str) -> dict:
 
     import mesh  # noqa: PLC0415
     from bench.scaling import subdivided  # noqa: PLC0415
+    from bench.tails import tail_times  # noqa: PLC0415 — t₁: within 1e-3 of the final objective
     from objectives.cmm import compressed_modes, first_eigenpairs, unpack_laplacian  # noqa: PLC0415
 
     V, F, _ = subdivided(base, level, Path(cache))
@@ -53,12 +53,10 @@ def worker(base: str, level: int, k: int, cache: str) -> dict:
     t_eig = time.perf_counter() - t0
     mu = 2.0 * float(pairs[0][-1])
     r = compressed_modes(lap, k, mu, eigenpairs=pairs)
-    h = np.asarray(r.history["objective"], dtype=float)
-    times = np.asarray(r.history["time"], dtype=float)
-    hit = np.nonzero(np.abs(h - h[-1]) <= NEAR * abs(h[-1]))[0]
+    t_near, _ = tail_times(np.asarray(r.history["time"], dtype=float), np.asarray(r.history["objective"], dtype=float))
     return {"level": level, "n": len(a), "k": k, "mu": mu, "laplacian_seconds": t_lap, "eigsh_seconds": t_eig,
             "seconds": r.wall_time, "compile_seconds": r.compile_time, "iterations": r.iterations,
-            "status": r.status, "objective": r.objective, "t_near": float(times[hit[0]]) if hit.size else None,
+            "status": r.status, "objective": r.objective, "t_near": t_near,
             "orthogonality": r.orthogonality,
             "ratio_to_eigsh": (r.wall_time + r.compile_time) / max(t_eig, 1e-9),
             "peak_rss_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2 ** 20}
