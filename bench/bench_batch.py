@@ -7,15 +7,17 @@ On one mesh (cotangent W, lumped A, unit area), k modes, uniform ℓ1 weights, f
 * ``starts``: B random starts at μ = 0.01·n;
 
 each in two modes — ``vmap`` (one compiled vmapped program) and ``loop`` (the single-problem
-program compiled once, called B times from Python) — for each preconditioner: SuperLU
-``(W + λ₁A)⁻¹`` through a host callback batched ``sequential`` (one host call per member) or
-``expand_dims`` (one host call per batch), Jacobi (diagonal, pure JAX), none. Every member runs
-a fixed number of CG iterations (``gtol`` = 0), so both modes do the same arithmetic and the
-ratio of run times is the speed-up of batching. Compile time is reported apart; run times are
-the best of ``--repeats`` runs (a first call pays one-time costs).
+program compiled once, called B times from Python) — for each preconditioner: the sparse
+Cholesky factor of ``W + λA`` (CHOLMOD as an XLA custom call, one native call per batch),
+Jacobi (its diagonal, pure JAX), none. With ``--until fixed`` every member runs exactly
+``--iters`` CG iterations (``gtol`` = 0), so both modes do the same arithmetic and the ratio of
+run times is the speed-up of batching; with ``--until converged`` each member stops on the
+solver's own tests (``objectives.batch.default_options``, ``--iters`` the cap), so the vmapped
+loop runs as long as its slowest member. Compile time is reported apart; run times are the best
+of ``--repeats`` runs (a first call pays one-time costs).
 
-    python -m bench.bench_batch                               # hand_868, bunny; B = 8, 60 iterations
-    python -m bench.bench_batch --meshes fandisk.off --iters 30
+    python -m bench.bench_batch                               # starfish, torus; B = 8, 60 iterations
+    python -m bench.bench_batch --meshes fandisk.off --until converged --iters 2000
 """
 
 from __future__ import annotations
@@ -37,11 +39,10 @@ from bench.meshes import load_mesh  # noqa: E402
 from bench.environment import run_meta  # noqa: E402
 from objectives.batch import cmm_batch, cmm_problem, default_options  # noqa: E402
 
-CONFIGS = [  # (label, preconditioner, callback batching)
-    ("superlu/sequential", "shifted", "sequential"),
-    ("superlu/expand_dims", "shifted", "expand_dims"),
-    ("jacobi", "jacobi", "sequential"),
-    ("none", None, "sequential"),
+CONFIGS = [  # (label, preconditioner); "shifted" is CHOLMOD as an XLA custom call (stiefel.ffi_solve) under x64
+    ("cholmod (custom call)", "shifted"),
+    ("jacobi", "jacobi"),
+    ("none", None),
 ]
 
 
@@ -68,7 +69,7 @@ def profile_pieces(lap, k, B):
         "jvp along Z (line search)": (lambda x, z: jax.jvp(lambda y: F(y), (x,), (z,)), (X, Z)),
         "W·X (ELL gathers)": (lambda x: F.W.mv(x), (X,)),
         "Σ X∘(W·X) (gathers fused into a reduction)": (lambda x: jnp.sum(x * F.W.mv(x)), (X,)),
-        "SuperLU P·X (host callback)": (lambda x: problem.precond.solve(x), (X,)),
+        "sparse Cholesky P·X (custom call)": (lambda x: problem.precond.solve(x), (X,)),
         "Cholesky retraction": (lambda x, z: S.retract(x, z), (X, Z)),
     }
     rows = []
@@ -85,38 +86,37 @@ def run_mesh(name, args):
     m, _ = load_mesh(name)
     lap = mesh.laplacian(m, weights="cotangent", area="lumped")
     n, k, B = lap.n, args.k, args.batch
-    opts = default_options(max_iters=args.iters, gtol=0.0, ftol=0.0)
+    fixed = args.until == "fixed"
+    opts = default_options(max_iters=args.iters, gtol=0.0, ftol=0.0) if fixed else default_options(max_iters=args.iters)
     mus = np.geomspace(args.mu_lo, args.mu_hi, B) * n
     starts = np.random.default_rng(0).standard_normal((B, n, k))
     rows = []
     for kind in args.kinds:
         batch = {"mu": dict(mus=mus), "starts": dict(mus=0.01 * n, starts=starts)}[kind]
-        for label, prec, cb in CONFIGS:
-            if kind == "starts" and cb == "expand_dims":
+        for label, prec in CONFIGS:
+            if label.split()[0] not in args.preconditioners:
                 continue
             res = {}
             for mode in ("loop", "vmap"):
-                if mode == "loop" and cb == "expand_dims":
-                    res[mode] = res_loop_seq  # the loop never batches the callback: same program
-                    continue
-                runs = [cmm_batch(lap, k, weighting="uniform", preconditioner=prec, options=opts, mode=mode,
-                                  callback_vmap=cb, **batch) for _ in range(args.repeats)]
+                runs = [cmm_batch(lap, k, weighting="uniform", preconditioner=prec, options=opts, mode=mode, **batch)
+                        for _ in range(args.repeats)]
                 r = min(runs, key=lambda x: x.wall_time)  # best of repeats: first calls pay one-time costs
                 r.compile_time = runs[0].compile_time
                 res[mode] = r
-                if mode == "loop" and prec == "shifted":
-                    res_loop_seq = r
             lo, vm = res["loop"], res["vmap"]
-            row = {"batch": kind, "preconditioner": label, "B": B, "iterations_per_member": args.iters,
+            its = int(lo.iterations.sum())
+            row = {"batch": kind, "preconditioner": label, "B": B, "until": args.until,
+                   "iterations_loop": lo.iterations.tolist(), "iterations_vmap": vm.iterations.tolist(),
                    "loop_run_s": lo.wall_time, "loop_compile_s": lo.compile_time,
                    "vmap_run_s": vm.wall_time, "vmap_compile_s": vm.compile_time,
                    "speedup": lo.wall_time / vm.wall_time,
-                   "ms_per_member_iteration_loop": 1e3 * lo.wall_time / (B * args.iters),
-                   "ms_per_member_iteration_vmap": 1e3 * vm.wall_time / (B * args.iters),
+                   "speedup_with_compile": (lo.wall_time + lo.compile_time) / (vm.wall_time + vm.compile_time),
+                   "ms_per_member_iteration_loop": 1e3 * lo.wall_time / its,
+                   "ms_per_member_iteration_vmap": 1e3 * vm.wall_time / (B * int(vm.iterations.max())),
                    "max_abs_dx_vmap_vs_loop": float(np.max(np.abs(lo.modes - vm.modes))),
                    "max_rel_dobjective": float(np.max(np.abs(lo.objective - vm.objective) / np.abs(lo.objective))),
                    "max_orthogonality_vmap": float(np.max(vm.orthogonality)),
-                   "objectives_vmap": vm.objective.tolist()}
+                   "status_vmap": vm.status_names, "objectives_vmap": vm.objective.tolist()}
             rows.append(row)
             print(json.dumps(row), flush=True)
     pieces = profile_pieces(lap, k, B) if args.profile else []
@@ -126,7 +126,8 @@ def run_mesh(name, args):
 def markdown(meta, results):
     out = [f"machine: {meta['machine']}; date {meta['date']}; jax {meta['jax']}, scipy {meta['scipy']}, numpy "
            f"{meta['numpy']}; k = {meta['k']}, B = {meta['batch']}, "
-           f"{meta['iters']} CG iterations per member (fixed), best of {meta['repeats']} runs, μ ∈ [{meta['mu_lo']}, "
+           + (f"{meta['iters']} CG iterations per member (fixed)" if meta.get('until', 'fixed') == 'fixed' else
+              f"each member to convergence (at most {meta['iters']} iterations)") + f", best of {meta['repeats']} runs, μ ∈ [{meta['mu_lo']}, "
            f"{meta['mu_hi']}]·n (geometric) or random starts at μ = 0.01·n; uniform weighting, f6, ε = δ = 1e-3; "
            f"command `{meta['command']}`", ""]
     for result in results:
@@ -136,12 +137,16 @@ def markdown(meta, results):
 
 def _table(result):
     out = [f"**{result['mesh']}** (n = {result['n']})", "",
-           "| batch | preconditioner | loop run (s) | vmap run (s) | speed-up | loop ms/member-it. | vmap ms/member-it. "
-           "| compile loop / vmap (s) | max‖ΔX‖ vmap vs loop | max rel. Δobjective | max‖XᵀAX − I‖ |",
-           "|---|---|---|---|---|---|---|---|---|---|---|"]
+           "| batch | preconditioner | iterations (members) | loop run (s) | vmap run (s) | speed-up | with compile "
+           "| loop ms/member-it. | vmap ms/member-it. | compile loop / vmap (s) | max‖ΔX‖ vmap vs loop "
+           "| max rel. Δobjective | max‖XᵀAX − I‖ |",
+           "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in result["rows"]:
-        out.append(f"| {r['batch']} | {r['preconditioner']} | {r['loop_run_s']:.2f} | {r['vmap_run_s']:.2f} | "
-                   f"{r['speedup']:.2f}× | {r['ms_per_member_iteration_loop']:.2f} | "
+        its = r.get("iterations_loop", [])
+        span = f"{min(its)}–{max(its)}" if its and min(its) != max(its) else (str(its[0]) if its else "")
+        out.append(f"| {r['batch']} | {r['preconditioner']} | {span} | {r['loop_run_s']:.2f} | {r['vmap_run_s']:.2f} | "
+                   f"{r['speedup']:.2f}× | {r.get('speedup_with_compile', float('nan')):.2f}× | "
+                   f"{r['ms_per_member_iteration_loop']:.2f} | "
                    f"{r['ms_per_member_iteration_vmap']:.2f} | {r['loop_compile_s']:.1f} / {r['vmap_compile_s']:.1f} | "
                    f"{r['max_abs_dx_vmap_vs_loop']:.1e} | {r['max_rel_dobjective']:.1e} | "
                    f"{r['max_orthogonality_vmap']:.1e} |")
@@ -167,12 +172,16 @@ def main(argv=None):
     p.add_argument("--repeats", type=int, default=2, help="runs per mode; the fastest is reported")
     p.add_argument("--profile", action=argparse.BooleanOptionalAction, default=True,
                    help="also time the pieces of one iteration, single vs vmapped")
+    p.add_argument("--preconditioners", nargs="+", default=["cholmod", "jacobi", "none"],
+                   choices=["cholmod", "jacobi", "none"])
+    p.add_argument("--until", choices=["fixed", "converged"], default="fixed",
+                   help="fixed: --iters iterations per member (equal work); converged: the solver's own stopping tests")
     p.add_argument("--kinds", nargs="+", default=["mu", "starts"], choices=["mu", "starts"])
     p.add_argument("--out", default=str(Path(__file__).with_name("results_batch.json")))
     args = p.parse_args(argv)
     results = [run_mesh(name, args) for name in args.meshes]
     meta = run_meta("bench.bench_batch", argv, batch=args.batch, k=args.k,
-                   iters=args.iters, repeats=args.repeats, mu_lo=args.mu_lo, mu_hi=args.mu_hi)
+                   iters=args.iters, until=args.until, repeats=args.repeats, mu_lo=args.mu_lo, mu_hi=args.mu_hi)
     Path(args.out).write_text(json.dumps({"meta": meta, "results": results}, indent=1))
     md = markdown(meta, results)
     print(md)

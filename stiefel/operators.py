@@ -38,6 +38,7 @@ from jaxtyping import Array, Float, Int
 
 from . import ffi_solve
 from ._compile import host_array
+from .ell import ell_matvec
 from .errors import NotSPDError, ShapeError
 from .sparse_factor import SymmetricFactor
 from .validation import check_finite
@@ -278,12 +279,7 @@ class SparseOperator(LinearOperator):
         return self.csr.value
 
     def mv(self, x):
-        out = None
-        for j in range(self.width):  # static, unrolled: w gathers, no scatter
-            coeff = self.vals[:, j].reshape((-1,) + (1,) * (x.ndim - 1))
-            term = coeff * jnp.take(x, self.cols[:, j], axis=0, mode="clip")  # in bounds; "clip" lowers faster
-            out = term if out is None else out + term
-        return out
+        return ell_matvec(self.vals, self.cols, x)  # w gathers, no scatter; batches per member (stiefel.ell)
 
     def solve(self, y):
         if self.chol is not None:
