@@ -14,9 +14,12 @@ different smoothings is run as a Python loop over one vmapped group per smoothin
 
 ``mode="loop"`` runs the *same* single-problem solver, compiled once, in a Python loop
 over the batch: the reference the vmapped batch is measured against
-(``bench/bench_batch.py``).
+(``bench/bench_batch.py``), and what ``mode="auto"`` (the default) runs on a CPU, where it is
+faster; accelerators get the vmapped program.
 
-Preconditioners: ``"shifted"`` applies ``(W + σA)⁻¹`` by the sparse LDLᵀ factorisation (``stiefel.sparse_factor``) on the host
+Preconditioners: ``"shifted"`` applies ``(W + σA)⁻¹`` by CHOLMOD as an XLA custom call
+(``stiefel.ffi_solve``; one native call for the whole batch) where available, else by the sparse
+factorisation (``stiefel.sparse_factor``) on the host
 (``jax.pure_callback``; under vmap one host call per member, or with
 ``callback_vmap="expand_dims"`` one call for the whole batch), ``"jacobi"`` its diagonal
 (pure JAX), ``None`` none.
@@ -108,12 +111,14 @@ def _solve_one(problem: CMMProblem, mu: Float[Array, ""], eps: Float[Array, ""],
 
 def cmm_problem(lap, k: int, *, smoothing: str = "f6", weighting: str = "area",
                 preconditioner: str | None = "shifted", sigma: float | None = None, dtype=None,
-                callback_vmap: str = "sequential") -> tuple[CMMProblem, np.ndarray]:
+                callback_vmap: str = "sequential", solve_backend: str | None = None) -> tuple[CMMProblem, np.ndarray]:
     """The energy, manifold (A-orthonormality, Cholesky retraction) and preconditioner of a CMM
     problem in ``dtype``, and the eigenbasis start ``(n, k)`` (float64 numpy).
 
     ``sigma`` (the shift of ``W + σA``) defaults to the largest of the first k eigenvalues (λ₁ for
-    k ≤ 2), as in ``compressed_modes``.
+    k ≤ 2), as in ``compressed_modes``. ``solve_backend`` and ``callback_vmap``: how the shifted
+    preconditioner is solved (``SparseOperator.from_scipy``: ``"ffi"``, the CHOLMOD custom call, where
+    available, or ``"callback"``, a host factorisation whose batching ``callback_vmap`` chooses).
     """
     if preconditioner not in PRECONDITIONERS:
         raise ParameterError(f"preconditioner must be one of {PRECONDITIONERS}, got {preconditioner!r}")
@@ -129,7 +134,8 @@ def cmm_problem(lap, k: int, *, smoothing: str = "f6", weighting: str = "area",
     manifold = stiefel.GeneralizedStiefel(a, k, retraction="cholesky", dtype=dtype)
     K = sp.csr_array(W) + sigma * sp.diags_array(a)
     if preconditioner == "shifted":
-        precond = SparseOperator.from_scipy(K, factor=True, dtype=dtype, vmap_method=callback_vmap)
+        precond = SparseOperator.from_scipy(K, factor=True, dtype=dtype, vmap_method=callback_vmap,
+                                            solve_backend=solve_backend)
     elif preconditioner == "jacobi":
         precond = stiefel.DiagonalOperator(jnp.asarray(K.diagonal(), dtype=dtype))
     else:
@@ -180,8 +186,9 @@ def cmm_batch(
     preconditioner: str | None = "shifted",
     sigma: float | None = None,
     options: stiefel.BlockOptions | None = None,
-    mode: str = "vmap",
+    mode: str = "auto",
     callback_vmap: str = "sequential",
+    solve_backend: str | None = None,
     dtype=None,
 ) -> BatchResult:
     """Solve a batch of CMM problems on one mesh (module docstring).
@@ -200,10 +207,15 @@ def cmm_batch(
       sigma: σ; default the largest of the first k eigenvalues (as ``compressed_modes``).
       options: ``stiefel.BlockOptions`` (default ``default_options()``); ``options.max_iters`` caps each
         member's solve (one solve per member: the total of its iterations).
-      mode: ``"vmap"`` (one vmapped program) or ``"loop"`` (the single-problem program,
-        compiled once, called B times from Python).
-      callback_vmap: ``"sequential"`` or ``"expand_dims"``: how the sparse-solve host callback is
-        batched under vmap (``SparseOperator.from_scipy``).
+      mode: ``"vmap"`` (one vmapped program), ``"loop"`` (the single-problem program, compiled
+        once, called B times from Python) or ``"auto"``: the loop on a CPU backend, where it was the
+        faster in every measured case (B = 8 to convergence: vmap at 0.51–0.54× the loop's speed on
+        fandisk, n = 7229; 0.59–0.92× on starfish and hand_868 — the batch runs until its slowest
+        member stops, and a member-iteration costs about as much batched as alone;
+        ``bench/RESULTS_batch.md``), the vmapped program on an accelerator. ``BatchResult.mode``
+        says which ran.
+      callback_vmap, solve_backend: how the shifted preconditioner is solved and batched
+        (``cmm_problem``).
       dtype: float32 / float64 (default: float64 if x64 is enabled).
 
     Returns:
@@ -212,8 +224,10 @@ def cmm_batch(
     Checked before any work: ``ParameterError`` (k, μ ≥ 0, ε, δ > 0, σ > 0, options), ``NonFiniteError``
     and ``RankDeficientError`` for the starts.
     """
-    if mode not in ("vmap", "loop"):
-        raise ParameterError(f"mode must be 'vmap' or 'loop', got {mode!r}")
+    if mode not in ("auto", "vmap", "loop"):
+        raise ParameterError(f"mode must be 'auto', 'vmap' or 'loop', got {mode!r}")
+    if mode == "auto":
+        mode = "loop" if jax.default_backend() == "cpu" else "vmap"
     options = options or default_options()
     if not isinstance(options, stiefel.BlockOptions):
         raise ParameterError(f"options must be a stiefel.BlockOptions (e.g. default_options(...)), got {options!r}")
@@ -223,7 +237,8 @@ def cmm_batch(
     check_count("k", k, 1, a.shape[0], high_label=f"n = {a.shape[0]}")
     _check_batch(mus, eps, delta, starts, a, k)
     problem, X_eig = cmm_problem((W, a), k, smoothing=names[0], weighting=weighting, preconditioner=preconditioner,
-                                 sigma=sigma, dtype=dtype, callback_vmap=callback_vmap)
+                                 sigma=sigma, dtype=dtype, callback_vmap=callback_vmap,
+                                 solve_backend=solve_backend)
     mus_b, eps_b, delta_b, starts_b = _broadcast(mus, eps, delta, starts, X_eig, B_smooth)
     B = len(mus_b)
     per_member = names * B if len(names) == 1 else names

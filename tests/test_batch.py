@@ -1,5 +1,6 @@
 """objectives.batch: a vmapped batch of CMM solves equals the same solves one at a time."""
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -70,10 +71,10 @@ def test_vmap_over_starts_and_smoothings(lap):
     starts = rng.standard_normal((3, lap.n, K))
     opts = default_options(max_iters=10, gtol=1e-12, ftol=0.0)
     mu = 0.01 * lap.n
-    kw = dict(weighting="uniform", preconditioner="jacobi", options=opts)
+    kw = dict(weighting="uniform", preconditioner="jacobi", options=opts, mode="vmap")
     batched = cmm_batch(lap, K, mu, starts=starts, eps=[1e-3, 1e-2, 1e-1], delta=[1e-3, 1e-2, 1e-1], **kw)
-    looped = cmm_batch(lap, K, mu, starts=starts, eps=[1e-3, 1e-2, 1e-1], delta=[1e-3, 1e-2, 1e-1], mode="loop",
-                       **kw)
+    looped = cmm_batch(lap, K, mu, starts=starts, eps=[1e-3, 1e-2, 1e-1], delta=[1e-3, 1e-2, 1e-1],
+                       **{**kw, "mode": "loop"})
     _assert_same(batched, looped)
     assert np.max(batched.orthogonality) <= 1e-10
     mixed = cmm_batch(lap, K, [mu, mu, 2 * mu], smoothing=["f6", "f3", "f6"], **kw)
@@ -86,12 +87,26 @@ def test_vmap_over_starts_and_smoothings(lap):
 
 
 def test_expand_dims_callback_matches_sequential(lap):
-    """The SuperLU preconditioner batched as one host call (``expand_dims``) gives the same batch."""
+    """The host-factorisation preconditioner batched as one host call (``expand_dims``) gives the same
+    batch as one call per member, and both the same as the CHOLMOD custom call."""
     mus = np.array([0.005, 0.02]) * lap.n
     opts = default_options(max_iters=8, gtol=1e-12, ftol=0.0)
-    seq = cmm_batch(lap, K, mus, weighting="uniform", options=opts, callback_vmap="sequential")
-    one = cmm_batch(lap, K, mus, weighting="uniform", options=opts, callback_vmap="expand_dims")
+    kw = dict(weighting="uniform", options=opts, mode="vmap")
+    seq = cmm_batch(lap, K, mus, callback_vmap="sequential", solve_backend="callback", **kw)
+    one = cmm_batch(lap, K, mus, callback_vmap="expand_dims", solve_backend="callback", **kw)
     _assert_same(seq, one, x_tol=1e-12)
+    _assert_same(seq, cmm_batch(lap, K, mus, **kw))
+
+
+def test_auto_mode_is_the_loop_on_cpu_and_vmap_elsewhere(lap, monkeypatch):
+    """``mode="auto"`` (the default) runs the loop on a CPU backend (measured faster there) and says so."""
+    opts = default_options(max_iters=3, gtol=1e-12, ftol=0.0)
+    out = cmm_batch(lap, K, [0.01 * lap.n, 0.02 * lap.n], weighting="uniform", preconditioner=None, options=opts)
+    assert out.mode == ("loop" if jax.default_backend() == "cpu" else "vmap")
+    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+    on_gpu = cmm_batch(lap, K, [0.01 * lap.n, 0.02 * lap.n], weighting="uniform", preconditioner=None, options=opts)
+    assert on_gpu.mode == "vmap"
+    _assert_same(out, on_gpu)
 
 
 def test_bad_batch_input(lap):
