@@ -122,6 +122,10 @@ def cmm_problem(lap, k: int, *, smoothing: str = "f6", weighting: str = "area",
     """
     if preconditioner not in PRECONDITIONERS:
         raise ParameterError(f"preconditioner must be one of {PRECONDITIONERS}, got {preconditioner!r}")
+    if callback_vmap not in ("sequential", "expand_dims"):
+        raise ParameterError(f"callback_vmap must be 'sequential' or 'expand_dims', got {callback_vmap!r}")
+    if solve_backend not in (None, "ffi", "callback"):
+        raise ParameterError(f"solve_backend must be 'ffi', 'callback' or None, got {solve_backend!r}")
     W, a = unpack_laplacian(lap)
     check_count("k", k, 1, a.shape[0], high_label=f"n = {a.shape[0]}")
     if sigma is not None:

@@ -116,3 +116,7 @@ def test_bad_batch_input(lap):
         cmm_batch(lap, K, [1.0], mode="pmap")
     with pytest.raises(ValueError, match="preconditioner"):
         cmm_batch(lap, K, [1.0], preconditioner="ilu")
+    with pytest.raises(ValueError, match="solve_backend"):  # checked even where no sparse solve would use it
+        cmm_batch(lap, K, [1.0], preconditioner=None, solve_backend="umfpack")
+    with pytest.raises(ValueError, match="callback_vmap"):
+        cmm_batch(lap, K, [1.0], preconditioner=None, callback_vmap="parallel")
