@@ -39,11 +39,12 @@ from bench.meshes import load_mesh  # noqa: E402
 from bench.environment import run_meta  # noqa: E402
 from objectives.batch import cmm_batch, cmm_problem, default_options  # noqa: E402
 
-CONFIGS = [  # (label, preconditioner); "shifted" is CHOLMOD as an XLA custom call (stiefel.ffi_solve) under x64
-    ("cholmod (custom call)", "shifted"),
-    ("jacobi", "jacobi"),
-    ("none", None),
-]
+CONFIGS = {  # --preconditioners name: (table label, cmm_batch preconditioner); "shifted" is CHOLMOD as an XLA
+    # custom call (stiefel.ffi_solve) under x64
+    "cholmod": ("cholmod (custom call)", "shifted"),
+    "jacobi": ("jacobi", "jacobi"),
+    "none": ("none", None),
+}
 
 
 def _time(fn, *a, repeats=20):
@@ -93,9 +94,7 @@ def run_mesh(name, args):
     rows = []
     for kind in args.kinds:
         batch = {"mu": dict(mus=mus), "starts": dict(mus=0.01 * n, starts=starts)}[kind]
-        for label, prec in CONFIGS:
-            if label.split()[0] not in args.preconditioners:
-                continue
+        for label, prec in (CONFIGS[name] for name in args.preconditioners):
             res = {}
             for mode in ("loop", "vmap"):
                 runs = [cmm_batch(lap, k, weighting="uniform", preconditioner=prec, options=opts, mode=mode, **batch)
@@ -172,8 +171,7 @@ def main(argv=None):
     p.add_argument("--repeats", type=int, default=2, help="runs per mode; the fastest is reported")
     p.add_argument("--profile", action=argparse.BooleanOptionalAction, default=True,
                    help="also time the pieces of one iteration, single vs vmapped")
-    p.add_argument("--preconditioners", nargs="+", default=["cholmod", "jacobi", "none"],
-                   choices=["cholmod", "jacobi", "none"])
+    p.add_argument("--preconditioners", nargs="+", default=list(CONFIGS), choices=list(CONFIGS))
     p.add_argument("--until", choices=["fixed", "converged"], default="fixed",
                    help="fixed: --iters iterations per member (equal work); converged: the solver's own stopping tests")
     p.add_argument("--kinds", nargs="+", default=["mu", "starts"], choices=["mu", "starts"])
