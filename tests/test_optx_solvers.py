@@ -67,6 +67,7 @@ def test_runtime_values_do_not_recompile(brockett):
     W, M, F, d, _ = brockett
     S = GeneralizedStiefel(M, K)
     X0 = S.random_point(jax.random.PRNGKey(0))
+    jax.clear_caches()  # r1 compiles here, whatever other modules in this process compiled
     r1 = stiefel.minimize(F, S, X0, args=d, gtol=1e-1, ftol=1e-12, c1=1e-4, max_iters=300)
     r2 = stiefel.minimize(F, S, X0, args=d, gtol=1e-7, ftol=1e-13, c1=1e-3, ftol_window=7, max_iters=300)
     assert r2.compile_time < 0.25 * r1.compile_time, (r1.compile_time, r2.compile_time)
