@@ -56,7 +56,6 @@ def ell_matvec(vals: Float[Array, "n w"], cols: Int[Array, "n w"], x: Float[Arra
     return _batched_product(vals, cols, x)
 
 
-@ell_matvec.defjvp
 def _ell_jvp(primals, tangents):
     vals, cols, x = primals
     d_vals, _, dx = tangents
