@@ -235,3 +235,51 @@ def test_scaling_modes_merge_keeps_other_rows(tmp_path, monkeypatch):
     assert [(r["level"], r["seconds"]) for r in rows] == [(1, 1.0), (4, 730.5)]  # level 1 replaced, level 4 kept
     assert rows[1]["date"] == "2026-11-26 09:39 UTC" and rows[1]["command"].endswith("--base bunny.off")
     assert "| bunny.off (4) | 2026-11-26 09:39 UTC | 891650 |" in out_md.read_text()
+
+
+def test_scaling_modes_carry_modes_is_a_orthonormal_and_keeps_constants():
+    """The coarse-to-fine carry of ``--coarse-start``: a constant carries exactly, the result is A-orthonormal."""
+    from bench.scaling_modes import carry_modes  # noqa: PLC0415
+
+    rng = np.random.default_rng(0)
+    Vc, Vf = rng.random((50, 3)), rng.random((400, 3))
+    a = 0.5 + rng.random(400)
+    modes = np.column_stack([np.ones(50), Vc[:, 0], rng.standard_normal(50)])
+    X = carry_modes(Vc, modes, Vf, a)
+    assert np.max(np.abs(X.T @ (a[:, None] * X) - np.eye(3))) < 1e-12
+    assert np.ptp(X[:, 0]) < 1e-12 and abs(X[0, 0] - 1.0 / np.sqrt(a.sum())) < 1e-12  # the constant column
+    # the first column spans the constants and the second what was carried of x: Gram–Schmidt order is kept
+    assert abs(np.corrcoef(X[:, 1], Vf[:, 0])[0, 1]) > 0.9
+
+
+def test_scaling_modes_report_lists_coarse_start_runs():
+    from bench.scaling_modes import report  # noqa: PLC0415
+
+    meta = {"date": "d", "machine": "m", "command": "c", "jax": "j", "scipy": "s", "numpy": "n", "base": "bunny.off",
+            "k": 10}
+    row = {"level": 2, "n": 55730, "k": 10, "eigsh_seconds": 1.2, "seconds": 38.2, "compile_seconds": 4.9,
+           "ratio_to_eigsh": 36.9, "t_near": 8.0, "iterations": 308, "status": "converged", "objective": 1389.4,
+           "peak_rss_gib": 1.2,
+           "coarse_start": {"n_coarse": 13934, "coarse_seconds": 13.2, "coarse_iterations": 337,
+                            "coarse_status": "converged", "carry_seconds": 0.1, "seconds": 24.1, "compile_seconds": 0.0,
+                            "iterations": 181, "status": "converged", "objective": 1389.4, "vs_default": 1.1e-8,
+                            "t_near": 1.3, "ratio_to_eigsh": 32.0}}
+    text = report([row, {"level": 3, "error": "not finished within 1800 s"}], meta)
+    assert "| bunny.off (2) | d | 55730 | 13934 | 13.2 (337) | 0.10 | 24.1 | 0.0 | 181 | 1.3 | 32.0 | +1.1e-08 |" in text
+    assert text.count("| bunny.off (3) |") == 1  # the failed level only in the first table
+
+
+def test_scaling_modes_passes_coarse_start_to_each_level(tmp_path, monkeypatch):
+    from bench import scaling_modes  # noqa: PLC0415
+
+    calls = []
+
+    class Done:
+        returncode, stderr = 0, ""
+        stdout = json.dumps({"level": 1, "error": "stub"})
+
+    monkeypatch.setattr(scaling_modes.subprocess, "run", lambda cmd, **k: calls.append(cmd) or Done())
+    out = ["--out-json", str(tmp_path / "r.json"), "--out-md", str(tmp_path / "r.md")]
+    assert scaling_modes.main(["--levels", "1", "2", "--coarse-start", *out]) == 0
+    assert scaling_modes.main(["--levels", "1", *out]) == 0
+    assert ["--coarse-start" in c for c in calls] == [True, True, False]
