@@ -107,7 +107,9 @@ def worker(base: str, level: int, k: int, cache: str, coarse_start: bool = False
     extra = {}
     if coarse_start and level >= 1:
         c = coarse_to_fine(base, level, k, Path(cache), mu, lap, pairs, r.objective)
-        c["ratio_to_eigsh"] = (c["coarse_seconds"] + c["carry_seconds"] + c["seconds"] + c["compile_seconds"]) / t_eig
+        # the fine solve reuses the default run's compilation here; a coarse-to-fine run alone would pay it
+        fine_compile = max(c["compile_seconds"], r.compile_time)
+        c["ratio_to_eigsh"] = (c["coarse_seconds"] + c["carry_seconds"] + c["seconds"] + fine_compile) / t_eig
         extra["coarse_start"] = c
     return {**extra, "level": level, "n": len(a), "k": k, "mu": mu, "laplacian_seconds": t_lap, "eigsh_seconds": t_eig,
             "seconds": r.wall_time, "compile_seconds": r.compile_time, "iterations": r.iterations,
@@ -145,8 +147,8 @@ def report(rows: list[dict], meta: dict) -> str:
                   "(inverse-distance weights of the 3 nearest coarse vertices, A-orthonormalised), then "
                   "`BlockCMM(continuation=1)` from them; same process as the default run of the row above. "
                   "coarse s: Laplacian, eigsh, solve and compile of the coarse mesh; total / eigsh: (coarse + carry + "
-                  "fine solve + fine compile) over the fine eigsh; vs default: the fine objective relative to the "
-                  "default run's", "",
+                  "fine solve + the default run's compile, which the fine solve reuses here but would pay alone) over the "
+                  "fine eigsh; vs default: the fine objective relative to the default run's", "",
                   "| mesh (level) | run | n | coarse n | coarse s (it.) | carry s | fine solve s | fine compile s | "
                   "fine iterations | fine t₁ s | total / eigsh | vs default | status |",
                   "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
