@@ -78,9 +78,10 @@ def test_padded_solve_matches_exact_shapes(weighting):
     run = compressed_modes((W, a), 4, 3.0, weighting=weighting, solver=BlockCMM(bucket_growth=1.5))
     assert run.params["padded_size"] > W.shape[0] and exact.params["padded_size"] == W.shape[0]
     assert run.modes.shape == exact.modes.shape and run.orthogonality <= 1e-12
-    # the same iteration up to the rounding of longer sums (amplified over the iterations)
+    # the same iteration up to the rounding of longer sums (amplified over the iterations); the smoothed minimum is
+    # flat, so modes agree to about the square root of the objective's agreement (2.3e-4 measured on AVX-512)
     assert run.objective == pytest.approx(exact.objective, rel=1e-7)
-    assert np.max(np.abs(run.modes - exact.modes)) <= 1e-4 * np.max(np.abs(exact.modes))
+    assert np.max(np.abs(run.modes - exact.modes)) <= 1e-3 * np.max(np.abs(exact.modes))
     assert abs(run.iterations - exact.iterations) <= 3
 
 

@@ -86,7 +86,8 @@ def test_point_preconditioner_that_ignores_the_point_changes_nothing():
 
 def test_curvature_preconditioner_cuts_hessian_products(problem, plain):
     """From the block solver's answer the point preconditioner needs far fewer Hessian products than K⁻¹
-    (measured: 651 vs 1944 to the same minimum)."""
+    (measured: 651 vs 1944 to the same minimum on one CPU, 684 vs 1180 on another with AVX-512: the shifted
+    run's count depends on rounding, so the bound is a cut by 30 %, not by half)."""
     W, a, pairs, mu, sigma = problem
     warm = plain
     S = stiefel.GeneralizedStiefel(a, K, retraction="cholesky")
@@ -102,7 +103,7 @@ def test_curvature_preconditioner_cuts_hessian_products(problem, plain):
         runs[name] = sol.stats
         assert int(sol.stats["status"]) == stiefel.Status.CONVERGED
     assert abs(float(runs["shifted"]["value"]) - float(runs["curvature"]["value"])) < 1e-9 * float(runs["shifted"]["value"])
-    assert int(runs["curvature"]["n_hvps"]) < 0.5 * int(runs["shifted"]["n_hvps"])
+    assert int(runs["curvature"]["n_hvps"]) < 0.7 * int(runs["shifted"]["n_hvps"])
 
 
 def test_block_cmm_polish_reaches_the_gradient_target(problem, plain):

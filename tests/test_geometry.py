@@ -198,9 +198,10 @@ def test_ordinary_stiefel_manifold_from_none():
         return jnp.trace(X.T @ A @ X @ N)
 
     X0 = stiefel.GeneralizedStiefel(np.ones(n), k).random_point(jax.random.PRNGKey(1))
-    ref = stiefel.minimize(brockett, stiefel.GeneralizedStiefel(np.ones(n), k), X0, gtol=1e-10)
+    # gtol 1e-8: the value is exact long before; below ~1e-9 the gradient stalls on round-off on some CPUs (AVX-512)
+    ref = stiefel.minimize(brockett, stiefel.GeneralizedStiefel(np.ones(n), k), X0, gtol=1e-8)
     for S in (stiefel.GeneralizedStiefel(None, k), stiefel.GeneralizedStiefel(None, k, n=n)):
-        got = stiefel.minimize(brockett, S, X0, gtol=1e-10)
+        got = stiefel.minimize(brockett, S, X0, gtol=1e-8)
         assert got.status_name == ref.status_name == "converged"
         assert float(got.value) == pytest.approx(float(ref.value), rel=1e-12)
         assert float(jnp.max(jnp.abs(got.x.T @ got.x - jnp.eye(k)))) <= 1e-12

@@ -34,9 +34,10 @@ def test_optx_path_equals_minimize(brockett, cls, method):
     X0 = S.random_point(jax.random.PRNGKey(2))
     P = stiefel.shifted_inverse(W, M, 0.5).solve
     kw = dict(c2=0.1) if method == "cg" else {}
-    sol = optx.minimise(F, cls(S, 0.0, 1e-9, preconditioner=P, **kw), X0, d, max_steps=400,
+    # gtol 1e-8: CG's projected gradient floors at 3.6e-9 on some CPUs (AVX-512), the value already exact
+    sol = optx.minimise(F, cls(S, 0.0, 1e-8, preconditioner=P, **kw), X0, d, max_steps=400,
                         adjoint=RiemannianImplicitAdjoint())
-    res = stiefel.minimize(F, S, X0, args=d, method=method, gtol=1e-9, max_iters=400, preconditioner=P)
+    res = stiefel.minimize(F, S, X0, args=d, method=method, gtol=1e-8, max_iters=400, preconditioner=P)
     assert res.converged and sol.result == optx.RESULTS.successful
     assert int(sol.stats["num_steps"]) == int(res.iterations)
     assert float(jnp.max(jnp.abs(sol.value - res.x))) <= 1e-12  # the same iterates: one implementation

@@ -286,11 +286,12 @@ def test_minimize_budget_is_a_runtime_limit():
 def test_minimize_sequential_max_iters_is_total_over_columns():
     """The k = 3 columns share the total fairly: column j may use ⌈left/(k − j)⌉, what it leaves rolls over."""
     f = lambda x: jnp.dot(x, jnp.asarray(W_DENSE) @ x)  # noqa: E731
-    free = stiefel.minimize_sequential(f, M_DIAG, K, gtol=1e-10, max_iters=500)
+    # gtol 1e-8: at 1e-10 two columns stall on round-off on some CPUs (AVX-512: 7e-10 and 1.2e-10 after 175 steps)
+    free = stiefel.minimize_sequential(f, M_DIAG, K, gtol=1e-8, max_iters=500)
     its = [int(i) for i in free.iterations]
     assert free.converged and min(its) > 3
     cap = sum(its) - 2  # smaller than the sum of the columns, larger than any one (per column: no cap)
-    res = stiefel.minimize_sequential(f, M_DIAG, K, gtol=1e-10, max_iters=cap)
+    res = stiefel.minimize_sequential(f, M_DIAG, K, gtol=1e-8, max_iters=cap)
     used = [int(i) for i in res.iterations]
     assert sum(used) <= cap and "max_iters" in res.status_names
     left = cap
