@@ -45,6 +45,7 @@ class State(NamedTuple):
     rho_mem: jax.Array  # (m,) 1/⟨s, y⟩
     n_mem: jax.Array  # pairs stored (≤ m); the newest sits at (n_pairs − 1) mod m
     n_pairs: jax.Array  # pairs stored since the last reset
+    retrying: jax.Array  # the last search failed: this iteration retries along −ξ, and a second failure is final
     aux: object  # fn's auxiliary output at X
 
 
@@ -106,7 +107,7 @@ def init_state(solver, fn, X0, args) -> State:
         F_prev=F0, C=F0, Q=jnp.ones((), dtype), it=zero_i, status=status0, history=hist,
         recent=jnp.full((STALL_WINDOW_MAX,), F0, dtype), n_fevals=jnp.ones((), jnp.int32), n_restarts=zero_i,
         S_mem=ta.stacked_zeros(m, X0, dtype), Y_mem=ta.stacked_zeros(m, X0, dtype),
-        rho_mem=jnp.zeros((m,), dtype), n_mem=zero_i, n_pairs=zero_i, aux=aux0,
+        rho_mem=jnp.zeros((m,), dtype), n_mem=zero_i, n_pairs=zero_i, retrying=jnp.zeros((), bool), aux=aux0,
     )
 
 
@@ -171,13 +172,13 @@ def _direction(solver, c: State):
     """``(η, slope tr(Rᵀη), restart, initial step guess)`` for CG and L-BFGS."""
     if solver.method == "cg":
         slope = _trace(c.G, c.eta)
-        restart = ~(slope < 0)
+        restart = ~(slope < 0) | c.retrying
         eta = tmap(lambda x, e: jnp.where(restart, -x, e), c.xi, c.eta)
         slope = jnp.where(restart, -_trace(c.G, c.xi), slope)
         return eta, slope, restart, jnp.where(c.it > 0, _interpolated_step(c, slope, c.step), c.step)
     eta = _lbfgs_direction(solver, c)
     slope = _trace(c.G, eta)
-    restart = ~(slope < 0)
+    restart = ~(slope < 0) | c.retrying
     if solver.preconditioner is not None:  # the preconditioned gradient only when needed (a host solve)
         eta = jax.lax.cond(restart, lambda: -_precondition_tangent(solver, c.X, c.xi), lambda: eta)
     else:
@@ -231,7 +232,8 @@ def step(solver, fn, args, c: State) -> State:
         window = solver.ftol_window.astype(jnp.int32)
         past = c.recent[(it - window) % c.recent.shape[0]]
         conv = conv | ((it >= window) & ok & (past - F_new <= solver.ftol * jnp.abs(F_new)))
-    # a failed search along a CG / L-BFGS direction is retried along −ξ (a reset) before giving up
+    # a failed search along a CG / L-BFGS direction is retried along −ξ (a reset) before giving up; a failed retry
+    # ends the run (it used to retry the same search until max_iters: e.g. 767 idle iterations, then "max_iters")
     retry = ~ok & ~restart if method != "bb" else jnp.zeros((), bool)
     status = jnp.where(retry, -1, jnp.where(~ok, Status.LINE_SEARCH_FAILED, jnp.where(
         ~finite, Status.NON_FINITE, jnp.where(conv, Status.CONVERGED, -1)))).astype(jnp.int32)
@@ -277,6 +279,6 @@ def step(solver, fn, args, c: State) -> State:
         history=c.history.record(it, F_rec, gn_rec, tau, _watch(solver, X_rec)),
         recent=c.recent.at[it % c.recent.shape[0]].set(F_rec),
         n_fevals=c.n_fevals + n_ls + 1, n_restarts=c.n_restarts + (restart | retry).astype(jnp.int32),
-        S_mem=S_mem, Y_mem=Y_mem, rho_mem=rho_mem, n_mem=n_mem, n_pairs=n_pairs,
+        S_mem=S_mem, Y_mem=Y_mem, rho_mem=rho_mem, n_mem=n_mem, n_pairs=n_pairs, retrying=retry,
         aux=jax.tree_util.tree_map(keep, aux_new, c.aux),
     )

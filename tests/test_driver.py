@@ -1,6 +1,7 @@
 """The host loop over compiled chunks (stiefel.driver): same iterates as one loop, bounded progress reports,
 clean stops, no callback in the compiled program, and the persistent compilation cache serves it."""
 
+import math
 import os
 import subprocess
 import sys
@@ -58,8 +59,12 @@ def test_reports_are_rate_limited(problem):
     reports = []
     res = minimize(F, S, X0, gtol=1e-14, max_iters=3000, progress=reports.append, progress_interval=0.2)
     elapsed = reports[-1].elapsed
-    assert int(res.iterations) > 50
-    assert len(reports) <= 1 + 3 + elapsed / 0.2 * 1.5  # the first chunks are short (1, 4, 16, ... iterations)
+    its = int(res.iterations)
+    assert its > 50
+    # gtol 1e-14 is out of reach: the run ends on the round-off floor (line_search_failed), after the warm-up
+    # chunks of 1, 4, 16, … iterations (at most 1 + ⌈log₄ its⌉), the start's and the end's reports
+    warmup = 1 + math.ceil(math.log(its, 4))
+    assert len(reports) <= 2 + warmup + elapsed / 0.2 * 1.5
 
 
 def test_stop_event_and_ctrl_c_interrupt_with_the_current_iterate(problem):
