@@ -348,7 +348,9 @@ class BlockCMM(_SmoothedSolver):
                 if tight:
                     break
                 tight = True  # no saddle where the loose test stopped: on to the final tolerance
-            if st != "converged":
+            # an intermediate stage whose line search failed (the round-off floor of its smoothing) hands its
+            # iterate to the next stage; the solve's status is the last stage's or a spent budget's
+            if st != "converged" and (last or st != "line_search_failed"):
                 status = st
             if st == "interrupted":
                 break

@@ -249,3 +249,33 @@ def test_cmm_result_prints_one_line(demo):
     text = repr(r)
     assert text.startswith(f"CMMResult(method='block', status={r.status!r}, n={lap.n}, k=3, objective=")
     assert "\n" not in text and len(text) < 300 and "array" not in text
+
+
+def test_block_intermediate_stage_line_search_failure_hands_on(demo, monkeypatch):
+    """A smoothing stage before the last whose line search failed passes its iterate on; the solve's status is the
+    last stage's (``converged`` here), while a failure in the last stage is the solve's status."""
+    from objectives import cmm_manifold  # noqa: PLC0415
+
+    lap, _ = demo
+    real = cmm_manifold._block_rounds
+    calls = []
+
+    def first_fails(*args, **kwargs):
+        out = real(*args, **kwargs)
+        calls.append(out[2])
+        return (*out[:2], "line_search_failed", *out[3:]) if len(calls) == 1 else out
+
+    monkeypatch.setattr(cmm_manifold, "_block_rounds", first_fails)
+    res = compressed_modes(lap, K, 0.01 * lap.n, solver=BlockCMM(continuation=2, saddle_checks=0), weighting="uniform")
+    assert len(calls) == 2 and res.status == "converged"
+
+    calls.clear()
+
+    def last_fails(*args, **kwargs):
+        out = real(*args, **kwargs)
+        calls.append(out[2])
+        return (*out[:2], "line_search_failed", *out[3:]) if len(calls) == 2 else out
+
+    monkeypatch.setattr(cmm_manifold, "_block_rounds", last_fails)
+    res = compressed_modes(lap, K, 0.01 * lap.n, solver=BlockCMM(continuation=2, saddle_checks=0), weighting="uniform")
+    assert len(calls) == 2 and res.status == "line_search_failed"
