@@ -33,7 +33,9 @@ def test_float32_block_solver_matches_float64(lap, preconditioner):
                           mode="loop", dtype=dt) for dt in (np.float64, np.float32)}
     r32, r64 = runs[np.float32], runs[np.float64]
     assert r32.modes.dtype == np.float32 and r64.modes.dtype == np.float64
-    assert r32.status_names[0] in ("converged", "max_iters")  # no line-search failure or NaN in float32
+    # no NaN; float32 reaches its round-off floor, where the search fails twice and the run stops
+    # (line_search_failed: it used to repeat that failure, the iterate unchanged, until max_iters)
+    assert r32.status_names[0] in ("converged", "max_iters", "line_search_failed")
     # orthogonality: float32 level (a few hundred ulps of XᵀAX over n = 868 rows), float64: rounding
     a = lap.A.diagonal()
     X32 = r32.modes[0].astype(np.float64)
@@ -58,6 +60,6 @@ def test_compressed_modes_float32(lap, method, rel_tol):
     mu = 0.01 * lap.n
     solver = SOLVERS[method](max_iters=1200)  # a total: 300 per stage (4) or per column (K ≤ 4)
     r32, r64 = (compressed_modes(lap, K, mu, solver=solver, dtype=dt) for dt in (jnp.float32, jnp.float64))
-    assert r32.status in ("converged", "max_iters")
+    assert r32.status in ("converged", "max_iters", "line_search_failed")  # float32's round-off floor (see above)
     assert abs(r32.objective - r64.objective) <= rel_tol * abs(r64.objective)
     assert r32.orthogonality <= 1e-12  # returned modes are re-orthonormalised in float64
