@@ -258,24 +258,15 @@ def test_block_intermediate_stage_line_search_failure_hands_on(demo, monkeypatch
 
     lap, _ = demo
     real = cmm_manifold._block_rounds
-    calls = []
+    for failing, expected in ((1, "converged"), (2, "line_search_failed")):  # stage 1 of 2, then the last
+        calls = []
 
-    def first_fails(*args, **kwargs):
-        out = real(*args, **kwargs)
-        calls.append(out[2])
-        return (*out[:2], "line_search_failed", *out[3:]) if len(calls) == 1 else out
+        def rounds(*args, failing=failing, calls=calls, **kwargs):
+            out = real(*args, **kwargs)
+            calls.append(out[2])
+            return (*out[:2], "line_search_failed", *out[3:]) if len(calls) == failing else out
 
-    monkeypatch.setattr(cmm_manifold, "_block_rounds", first_fails)
-    res = compressed_modes(lap, K, 0.01 * lap.n, solver=BlockCMM(continuation=2, saddle_checks=0), weighting="uniform")
-    assert len(calls) == 2 and res.status == "converged"
-
-    calls.clear()
-
-    def last_fails(*args, **kwargs):
-        out = real(*args, **kwargs)
-        calls.append(out[2])
-        return (*out[:2], "line_search_failed", *out[3:]) if len(calls) == 2 else out
-
-    monkeypatch.setattr(cmm_manifold, "_block_rounds", last_fails)
-    res = compressed_modes(lap, K, 0.01 * lap.n, solver=BlockCMM(continuation=2, saddle_checks=0), weighting="uniform")
-    assert len(calls) == 2 and res.status == "line_search_failed"
+        monkeypatch.setattr(cmm_manifold, "_block_rounds", rounds)
+        res = compressed_modes(lap, K, 0.01 * lap.n, solver=BlockCMM(continuation=2, saddle_checks=0),
+                               weighting="uniform")
+        assert len(calls) == 2 and res.status == expected, (failing, res.status)
