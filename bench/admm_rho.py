@@ -5,7 +5,7 @@
 
 For each mesh: k = 10, μ = n/100 (thesis Table 7.1's scale; area ℓ1 weights), a fixed budget of ``--iters``
 iterations, the same start for every run of a solver (``random``: seed 0, ρ₀ the solver's default
-``objectives.admm_rho.default_rho`` = ``max(μ, 1)``, divided by n for the thesis variant; ``eigen``: the first k
+``objectives.admm.rho.default_rho`` = ``max(μ, 1)``, divided by n for the thesis variant; ``eigen``: the first k
 eigenfunctions — restricted ones for the fast method — with ρ₀ = 2λ_(k−1), /n for the thesis variant, as
 ``ADMMCMM``/``FastCMM`` choose). Rows: solver (``admm``: Algorithm 3; ``fast``: Algorithm 8 on d = n/40 local
 functions), variant, rule, ρ₀, the true objective of the final A-orthonormal modes, iterations, status,
@@ -34,10 +34,10 @@ import scipy.sparse as sp  # noqa: E402
 import mesh  # noqa: E402
 from bench.environment import header_lines, run_meta, write_results  # noqa: E402
 from bench.meshes import load_mesh  # noqa: E402
-from objectives.admm import ADMMOptions, admm  # noqa: E402
-from objectives.admm_rho import STEPS, penalty_scale  # noqa: E402
-from objectives.cmm import first_eigenpairs, unpack_laplacian  # noqa: E402
-from objectives.fast import restricted_admm, restricted_eigenbasis  # noqa: E402
+from objectives.admm.splitting import ADMMOptions, admm  # noqa: E402
+from objectives.admm.rho import STEPS, penalty_scale  # noqa: E402
+from objectives.cmm.modes import first_eigenpairs, unpack_laplacian  # noqa: E402
+from objectives.admm.fast import restricted_admm, restricted_eigenbasis  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ["example:bumpy", "example:starfish", "example:torus"]

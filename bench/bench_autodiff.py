@@ -2,7 +2,7 @@
 
 ``python -m bench autodiff [--subdivisions 5] [--k 10] [--repeats 3]``: on the built-in demo
 surface (icosphere, ``--subdivisions 5``: n = 10 242) the smoothed CMM solve of
-``objectives.differentiable.cmm_solve`` (Huber, ε = 0.5, μ = 0.05n, L-BFGS, preconditioner
+``objectives.cmm.differentiable.cmm_solve`` (Huber, ε = 0.5, μ = 0.05n, L-BFGS, preconditioner
 ``(W + σA)⁻¹``, one wider stage ε = 2 first, started from the eigenbasis), and the gradient of a non-invariant loss
 ``Σ c∘Ψ`` with respect to (μ, the per-vertex ℓ1 weights, ε) by the implicit adjoint. Reported,
 each as the median of ``--repeats`` warm calls, compile time apart:
@@ -37,10 +37,10 @@ import optimistix as optx  # noqa: E402
 import mesh  # noqa: E402
 import stiefel  # noqa: E402
 from bench.environment import run_meta  # noqa: E402
-from cli.demo_mesh import demo_mesh  # noqa: E402
-from objectives.cmm import first_eigenpairs  # noqa: E402
-from objectives.differentiable import cmm_solve  # noqa: E402
-from objectives.energies import CMMEnergy  # noqa: E402
+from stiefel_cmm.cli.demo_mesh import demo_mesh  # noqa: E402
+from objectives.cmm.modes import first_eigenpairs  # noqa: E402
+from objectives.cmm.differentiable import cmm_solve  # noqa: E402
+from objectives.energy.energies import CMMEnergy  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 
@@ -81,7 +81,7 @@ def main(argv=None) -> int:
     n, k = a.shape[0], args.k
     evals, evecs = first_eigenpairs(lap.W, a, k)
     P = stiefel.shifted_inverse(lap.W, a, float(evals[-1])).solve
-    Wop = stiefel.operators.SparseOperator.from_scipy(lap.W)
+    Wop = stiefel.linalg.operators.SparseOperator.from_scipy(lap.W)
     area = jnp.asarray(a)
     mu0 = 0.05 * n
     t0 = time.perf_counter()

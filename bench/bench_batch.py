@@ -1,7 +1,7 @@
 """Batching (issue 7): ``jax.vmap`` over μ values / random starts vs a Python loop of the same solver.
 
 On one mesh (cotangent W, lumped A, unit area), k modes, uniform ℓ1 weights, f6 with
-ε = δ = 1e-3, ``objectives.batch.cmm_batch`` solves a batch of B problems:
+ε = δ = 1e-3, ``objectives.cmm.batch.cmm_batch`` solves a batch of B problems:
 
 * ``mu``: B μ values, geometric from ``mu_lo``·n to ``mu_hi``·n, eigenbasis start;
 * ``starts``: B random starts at μ = 0.01·n;
@@ -12,7 +12,7 @@ Cholesky factor of ``W + λA`` (CHOLMOD as an XLA custom call, one native call p
 Jacobi (its diagonal, pure JAX), none. With ``--until fixed`` every member runs exactly
 ``--iters`` CG iterations (``gtol`` = 0), so both modes do the same arithmetic and the ratio of
 run times is the speed-up of batching; with ``--until converged`` each member stops on the
-solver's own tests (``objectives.batch.default_options``, ``--iters`` the cap), so the vmapped
+solver's own tests (``objectives.cmm.batch.default_options``, ``--iters`` the cap), so the vmapped
 loop runs as long as its slowest member. Compile time is reported apart; run times are the best
 of ``--repeats`` runs (a first call pays one-time costs).
 
@@ -37,10 +37,10 @@ import numpy as np  # noqa: E402
 import mesh  # noqa: E402
 from bench.meshes import load_mesh  # noqa: E402
 from bench.environment import run_meta  # noqa: E402
-from objectives.batch import cmm_batch, cmm_problem, default_options  # noqa: E402
+from objectives.cmm.batch import cmm_batch, cmm_problem, default_options  # noqa: E402
 
 CONFIGS = {  # --preconditioners name: (table label, cmm_batch preconditioner); "shifted" is CHOLMOD as an XLA
-    # custom call (stiefel.ffi_solve) under x64
+    # custom call (stiefel.linalg.ffi_solve) under x64
     "cholmod": ("cholmod (custom call)", "shifted"),
     "jacobi": ("jacobi", "jacobi"),
     "none": ("none", None),

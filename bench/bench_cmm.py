@@ -3,14 +3,14 @@
 For each mesh (cotangent W, lumped A, unit area), k = 10, μ = 0.01·n, uniform ℓ1 weighting,
 all methods started from the first k eigenfunctions:
 
-* ADMM (``objectives.admm``, exact A-weighted form, ρ₀ = ``rho_factor``·λ_k with increase-only
-  adaptation, E-step by ``stiefel.sparse_factor.SymmetricFactor``) for a time budget: its best
+* ADMM (``objectives.admm.splitting``, exact A-weighted form, ρ₀ = ``rho_factor``·λ_k with increase-only
+  adaptation, E-step by ``stiefel.linalg.sparse_factor.SymmetricFactor``) for a time budget: its best
   true objective and the time at which it first came within 1e-3 (relative) of that best;
 * the block manifold solver (``compressed_modes(solver=BlockCMM(...))``: Huber smoothing with the
   library's default continuation, δ = 0.1 → 1e-3 in 4 stages (``--continuation 1``: none),
   Cholesky retraction) in each ``preconditioner:optimizer`` variant of ``--variants``
   (preconditioners ``(W + σA)⁻¹``, σ = λ_{k−1}, "shifted" and "active_set",
-  ``objectives.active_set``; optimizers Riemannian CG "cg" and L-BFGS "lbfgs",
+  ``objectives.cmm.active_set``; optimizers Riemannian CG "cg" and L-BFGS "lbfgs",
   ``stiefel.minimize``): the time at which its true objective (recorded every iteration)
   first comes within 1e-3 of ADMM's best, its final objective and orthogonality;
 * the thesis's sequential algorithm (optional, ``--sequential``) for reference;
@@ -48,9 +48,9 @@ import scipy  # noqa: E402
 
 import mesh  # noqa: E402
 from bench.meshes import load_mesh  # noqa: E402
-from objectives.cmm import compressed_modes, first_eigenpairs  # noqa: E402
-from objectives.cmm_solvers import ADMMCMM, BlockCMM, SequentialCMM  # noqa: E402
-from stiefel.sparse_factor import default_backend  # noqa: E402
+from objectives.cmm.modes import compressed_modes, first_eigenpairs  # noqa: E402
+from objectives.cmm.solvers import ADMMCMM, BlockCMM, SequentialCMM  # noqa: E402
+from stiefel.linalg.sparse_factor import default_backend  # noqa: E402
 
 REFERENCE = {  # issue 4: ADMM reference implementation (CHOLMOD), 2-core CPU
     "fandisk.off": (953.12, 29.0), "camelhead.off": (1299.2, 4.0), "bunny.off": (689.06, 0.7),

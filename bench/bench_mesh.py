@@ -10,7 +10,7 @@ with 10 242, 163 842 and 655 362 vertices (subdivisions 5, 7, 8). Times are the
 best of a few repeats (wall clock, ``time.perf_counter``), float64 throughout.
 
 ``W @ X`` (k = 10) is timed four ways: scipy CSR on the host; and three jitted
-JAX formulations — ``stiefel.operators.SparseOperator`` (padded neighbour table,
+JAX formulations — ``stiefel.linalg.operators.SparseOperator`` (padded neighbour table,
 "ELL"), ``jax.experimental.sparse.BCOO``, and gather + ``jax.ops.segment_sum`` —
 each in the mesh's own vertex order, a random order, and reverse Cuthill–McKee
 order (``mesh.reorder``).
@@ -48,7 +48,7 @@ import trimesh  # noqa: E402
 from jax.experimental import sparse as jsparse  # noqa: E402
 
 import mesh  # noqa: E402
-from stiefel.operators import SparseOperator  # noqa: E402
+from stiefel.linalg.operators import SparseOperator  # noqa: E402
 
 from bench.meshes import SHARED as MESH_DIR  # noqa: E402 — the test meshes beside the repository, when present
 SHARED = [

@@ -45,7 +45,7 @@ import scipy.sparse.linalg as sla  # noqa: E402
 
 import stiefel  # noqa: E402
 from bench.environment import run_meta  # noqa: E402
-from cli.grid_demo import grid_laplacian  # noqa: E402
+from stiefel_cmm.cli.grid_demo import grid_laplacian  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 NOTES = "<!-- notes -->"

@@ -8,7 +8,7 @@ preconditioner's output — in that dtype; JAX's x64 flag is on so that float64 
 * block Riemannian CG (``stiefel.solve_block``) with the SuperLU ``(W + λ₁A)⁻¹`` preconditioner,
   with the Jacobi (diagonal) one, and without;
 * the sequential solver (thesis Algorithm 6, ``stiefel.minimize_sequential``), preconditioned;
-* ADMM (``objectives.admm``) is numpy/SuperLU code in float64 only: it runs once, as the
+* ADMM (``objectives.admm.splitting``) is numpy/SuperLU code in float64 only: it runs once, as the
   reference objective, and has no float32 row.
 
 Reported per run: the true (non-smooth) objective of the returned iterate evaluated in float64,
@@ -36,10 +36,10 @@ import mesh  # noqa: E402
 from bench.meshes import load_mesh  # noqa: E402
 from bench.environment import run_meta  # noqa: E402
 import stiefel  # noqa: E402
-from objectives.admm import l1_weights_np  # noqa: E402
-from objectives.batch import cmm_batch, cmm_problem, default_options  # noqa: E402
-from objectives.cmm import compressed_modes  # noqa: E402
-from objectives.cmm_solvers import ADMMCMM  # noqa: E402
+from objectives.admm.splitting import l1_weights_np  # noqa: E402
+from objectives.cmm.batch import cmm_batch, cmm_problem, default_options  # noqa: E402
+from objectives.cmm.modes import compressed_modes  # noqa: E402
+from objectives.cmm.solvers import ADMMCMM  # noqa: E402
 
 DTYPES = {"float64": jnp.float64, "float32": jnp.float32}
 

@@ -31,7 +31,7 @@ import scipy.sparse as sp  # noqa: E402
 import scipy.sparse.linalg as sla  # noqa: E402
 
 import stiefel  # noqa: E402
-from cli.grid_demo import grid_laplacian  # noqa: E402
+from stiefel_cmm.cli.grid_demo import grid_laplacian  # noqa: E402
 
 
 def run_case(kind, W, M, ref, *, gtol, max_iters, precond, **kw):

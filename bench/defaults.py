@@ -33,9 +33,9 @@ import numpy as np  # noqa: E402
 import mesh  # noqa: E402
 from bench.environment import header_lines, run_meta  # noqa: E402
 from bench.meshes import load_mesh  # noqa: E402
-from cli.outputs import parse_mu  # noqa: E402
-from objectives.cmm import compressed_modes, first_eigenpairs, unpack_laplacian  # noqa: E402
-from objectives.cmm_solvers import BlockCMM  # noqa: E402
+from stiefel_cmm.cli.outputs import parse_mu  # noqa: E402
+from objectives.cmm.modes import compressed_modes, first_eigenpairs, unpack_laplacian  # noqa: E402
+from objectives.cmm.solvers import BlockCMM  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ["example:bumpy", "example:starfish", "example:torus", "example:patch"]

@@ -32,11 +32,11 @@ import scipy.sparse as sp  # noqa: E402
 import mesh  # noqa: E402
 from bench.environment import header_lines, run_meta, write_results  # noqa: E402
 from bench.meshes import load_mesh  # noqa: E402
-from objectives.admm import l1_weights_np  # noqa: E402
-from objectives.cmm import compressed_modes, first_eigenpairs, unpack_laplacian  # noqa: E402
-from objectives.cmm_solvers import ADMMCMM, BlockCMM  # noqa: E402
-from objectives.l1_optimality import l1_stationarity  # noqa: E402
-from objectives.support_finish import SupportFinish, finish_support, true_objective  # noqa: E402
+from objectives.admm.splitting import l1_weights_np  # noqa: E402
+from objectives.cmm.modes import compressed_modes, first_eigenpairs, unpack_laplacian  # noqa: E402
+from objectives.cmm.solvers import ADMMCMM, BlockCMM  # noqa: E402
+from objectives.energy.l1_optimality import l1_stationarity  # noqa: E402
+from objectives.cmm.support_finish import SupportFinish, finish_support, true_objective  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ["example:bumpy", "example:starfish", "example:torus"]

@@ -13,8 +13,8 @@ other defaults) timed from outside; compile, solve, setup and write seconds come
 * ``compare``: ``stiefel compare-smoothings`` (all ten smoothings) with a cold cache, against ``cold``.
 
 In one process (compile excluded): the solve time with a progress callback (reports every 0.25 s)
-against none, and the time per iteration with the problem padded by 0–40 % (``objectives.padding``),
-which chose ``stiefel.buckets.DEFAULT_GROWTH``.
+against none, and the time per iteration with the problem padded by 0–40 % (``objectives.cmm.padding``),
+which chose ``stiefel.runtime.buckets.DEFAULT_GROWTH``.
 
     python -m bench first-run                       # the demo mesh (no files needed)
     python -m bench first-run --meshes demo ../shared/meshes/fandisk.off ../shared/meshes/camelhead.off
@@ -38,7 +38,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def _stiefel(args: list[str], out: Path, cache: Path | None) -> dict:
     """Run ``stiefel ARGS`` in a fresh process; ``{"process_s", "timings", "status", "iterations", ...}``."""
-    cmd = [sys.executable, "-m", "cli.main", *args, "--out", str(out), "--quiet"]
+    cmd = [sys.executable, "-m", "stiefel_cmm.cli.main", *args, "--out", str(out), "--quiet"]
     cmd += ["--no-cache"] if cache is None else ["--cache-dir", str(cache)]
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     env.pop("STIEFEL_CACHE_DIR", None)
@@ -59,8 +59,8 @@ def _sibling(path: Path, out: Path) -> tuple[Path, int, int]:
     in the same size bucket: ``(path, n, n_sibling)``."""
     import mesh
     import trimesh
-    from objectives.padding import PaddedProblem
-    from stiefel.buckets import DEFAULT_GROWTH
+    from objectives.cmm.padding import PaddedProblem
+    from stiefel.runtime.buckets import DEFAULT_GROWTH
 
     def shapes(m):
         lap = mesh.laplacian(m)
@@ -108,9 +108,9 @@ def in_process(path: Path, k: int, fractions: list[float], rounds: int = 4) -> d
 
     jax.config.update("jax_enable_x64", True)  # benchmark script (an application)
     import mesh
-    import objectives.padding as padding
-    from objectives.cmm import compressed_modes
-    from objectives.cmm_solvers import BlockCMM
+    import objectives.cmm.padding as padding
+    from objectives.cmm.modes import compressed_modes
+    from objectives.cmm.solvers import BlockCMM
 
     lap = mesh.laplacian(mesh.load(path))
     mu = 0.01 * lap.n
@@ -164,7 +164,7 @@ def report(results: dict, meta: dict) -> str:
         if "error" in res:
             lines.append(f"| {name} | – | failed: {res['error'][:120]} | | | | | | | |")
             continue
-        for run, row in res["cli"].items():
+        for run, row in res["stiefel_cmm.cli"].items():
             t = row["timings"]
             lines.append(f"| {name} | {row['n']} | {run} | {row['process_s']:.2f} | {t.get('compile_s', 0):.2f} | "
                          f"{t.get('solve_s', 0):.2f} | {t.get('setup_s', 0):.2f} | {t.get('write_s', 0):.2f} | "
@@ -175,7 +175,7 @@ def report(results: dict, meta: dict) -> str:
     for name, res in results.items():
         if "error" in res:
             continue
-        c = res["cli"]
+        c = res["stiefel_cmm.cli"]
         cold = c["cold"]
 
         def excl(row):
@@ -188,7 +188,7 @@ def report(results: dict, meta: dict) -> str:
         lines.append(f"| {name} | {admm[0]} | {admm[1]} | {comp[0]} | {comp[1]} |")
     lines += ["", "In one process, compile excluded (best of 5, alternating): block solve with a progress callback (a report "
               "every 0.25 s) against none, and the cost of padding the problem by a fraction of its rows "
-              "(`objectives.padding`; best ms per iteration of 4 interleaved rounds, relative to no padding):", ""]
+              "(`objectives.cmm.padding`; best ms per iteration of 4 interleaved rounds, relative to no padding):", ""]
     for name, res in results.items():
         ip = res.get("in_process")
         if not ip:
@@ -220,7 +220,7 @@ def main(argv=None) -> int:
         meshes = list(args.meshes or ["demo"])
         if "demo" in meshes:  # the built-in demo mesh, as a file
             import trimesh
-            from cli.demo_mesh import demo_mesh
+            from stiefel_cmm.cli.demo_mesh import demo_mesh
 
             v, f = demo_mesh()
             meshes[meshes.index("demo")] = str(Path(tmp) / "demo.off")
@@ -236,7 +236,7 @@ def main(argv=None) -> int:
             try:
                 sizes[name] = mesh.load(path).n_vertices
                 heavy = sizes[name] <= args.heavy_max_n
-                results[name] = {"cli": cli_rows(path, work, admm=not args.no_admm,
+                results[name] = {"stiefel_cmm.cli": cli_rows(path, work, admm=not args.no_admm,
                                                  compare=heavy and not args.no_compare)}
             except (mesh.MeshError, RuntimeError) as e:  # e.g. a non-manifold mesh: recorded, the others go on
                 sizes[name] = None

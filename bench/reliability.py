@@ -47,8 +47,8 @@ class Case:
 
 
 def _cli(args: list[str], cwd: Path, *, prelude: str = "", timeout: float = 300) -> subprocess.CompletedProcess:
-    """``stiefel ARGS`` in a child process; ``prelude`` is Python run before ``cli.main`` (fault injection)."""
-    code = f"{prelude}\nimport sys\nfrom cli.main import _entry\nsys.argv = ['stiefel'] + {args!r}\n_entry()\n"
+    """``stiefel ARGS`` in a child process; ``prelude`` is Python run before ``stiefel_cmm.cli.main`` (fault injection)."""
+    code = f"{prelude}\nimport sys\nfrom stiefel_cmm.cli.main import _entry\nsys.argv = ['stiefel'] + {args!r}\n_entry()\n"
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     return subprocess.run([sys.executable, "-c", code], cwd=cwd, env=env, capture_output=True, text=True,
                           timeout=timeout)
@@ -186,7 +186,7 @@ def _disk_full(tmp: Path) -> tuple[bool, str]:
 
 def _concurrent(tmp: Path) -> tuple[bool, str]:
     out = tmp / "conc"
-    code = ("import sys\nfrom cli.main import _entry\n"
+    code = ("import sys\nfrom stiefel_cmm.cli.main import _entry\n"
             f"sys.argv = ['stiefel', 'modes', '--out', {str(out)!r}, '-k', '4', '--max-iters', '400']\n_entry()\n")
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     a = subprocess.Popen([sys.executable, "-c", code], cwd=tmp, env=env, stdout=subprocess.PIPE,
@@ -367,7 +367,7 @@ def _admm_cap(tmp: Path) -> tuple[bool, str]:
 
 def _interrupt_imports(tmp: Path) -> tuple[bool, str]:
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    a = subprocess.Popen([sys.executable, "-m", "cli.main", "modes", "--out", str(tmp / "imp")], cwd=tmp, env=env,
+    a = subprocess.Popen([sys.executable, "-m", "stiefel_cmm.cli.main", "modes", "--out", str(tmp / "imp")], cwd=tmp, env=env,
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     time.sleep(0.4)
     a.send_signal(signal.SIGINT)
@@ -379,7 +379,7 @@ def _interrupt_imports(tmp: Path) -> tuple[bool, str]:
 
 def _sigterm_solve(tmp: Path) -> tuple[bool, str]:
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    a = subprocess.Popen([sys.executable, "-m", "cli.main", "modes", "--out", str(tmp / "term"), "-k", "6",
+    a = subprocess.Popen([sys.executable, "-m", "stiefel_cmm.cli.main", "modes", "--out", str(tmp / "term"), "-k", "6",
                           "--max-iters", "5000", "--no-png"], cwd=tmp, env=env, stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True)
     for line in a.stdout:
@@ -449,7 +449,7 @@ def _api(expr: str, error: str | None, pattern: str, setup: str = ""):
     code = (
         "import jax; jax.config.update('jax_enable_x64', True)\n"
         "import numpy as np, scipy.sparse as sp, jax.numpy as jnp\n"
-        "import stiefel, mesh, objectives\nfrom cli.demo_mesh import demo_mesh\n"
+        "import stiefel, mesh, objectives\nfrom stiefel_cmm.cli.demo_mesh import demo_mesh\n"
         f"{setup}\n"
         "try:\n"
         f"    r = {expr}\n    print('RESULT accepted: ' + repr(r)[:160])\n"

@@ -1,5 +1,5 @@
-"""What the PNG contact sheet costs: the former renderer (``git show REV:cli/render.py``) against
-``cli/render.py`` now, side by side in one process, k fields on each mesh.
+"""What the PNG contact sheet costs: the former renderer (``git show REV:stiefel_cmm.stiefel_cmm/cli/render.py``) against
+``stiefel_cmm.stiefel_cmm/cli/render.py`` now, side by side in one process, k fields on each mesh.
 
 Fields: the first ``k`` Laplacian eigenvectors (``mesh.eigenbasis``), as ``stiefel eigs`` draws them.
 Each repeat draws the old sheet and then the new one (interleaved, so that load from other processes
@@ -40,9 +40,9 @@ OLD_REV = "ed11ffa69599de64f1fbc9f628bc0a2df6e7b599"
 
 
 def _old_renderer(rev: str, tmp: Path):
-    """The module ``cli/render.py`` at git revision ``rev``, imported from a temporary file; None without git."""
+    """The module ``stiefel_cmm.stiefel_cmm/cli/render.py`` at git revision ``rev``, imported from a temporary file; None without git."""
     try:
-        src = subprocess.run(["git", "show", f"{rev}:cli/render.py"], cwd=ROOT, capture_output=True, text=True,
+        src = subprocess.run(["git", "show", f"{rev}:stiefel_cmm.stiefel_cmm/cli/render.py"], cwd=ROOT, capture_output=True, text=True,
                              check=True).stdout
     except (OSError, subprocess.CalledProcessError) as exc:
         print(f"old renderer unavailable ({exc}); timing the new one only", file=sys.stderr)
@@ -58,7 +58,7 @@ def _old_renderer(rev: str, tmp: Path):
 def _mesh(spec: str) -> tuple[str, np.ndarray, np.ndarray]:
     """``demo`` / ``demo:S`` (the built-in surface at S subdivisions) or a mesh file."""
     import mesh
-    from cli.demo_mesh import demo_mesh
+    from stiefel_cmm.cli.demo_mesh import demo_mesh
 
     if spec.startswith("demo"):
         sub = int(spec.split(":")[1]) if ":" in spec else 4
@@ -82,8 +82,8 @@ STAGES = {"orient": ("_Scene", "__init__"), "rasterise": ("_Scene", "pixels"), "
 
 
 def _stage_times(run, repeats: int) -> dict[str, float]:
-    """Best CPU seconds per stage of :mod:`cli.render` over ``repeats`` calls of ``run()`` (text caches cleared)."""
-    from cli import render
+    """Best CPU seconds per stage of :mod:`stiefel_cmm.cli.render` over ``repeats`` calls of ``run()`` (text caches cleared)."""
+    from stiefel_cmm.cli import render
 
     spent: dict[str, float] = {}
     saved = []
@@ -122,10 +122,10 @@ _CHILD = r'''
 import json, sys, time
 sys.path.insert(0, sys.argv[1])
 import numpy as np
-import cli.main, mesh                      # what a stiefel process has loaded when it draws
+import stiefel_cmm.cli.main, mesh                      # what a stiefel process has loaded when it draws
 d = np.load(sys.argv[3])
 if sys.argv[2] == "new":
-    from cli import render
+    from stiefel_cmm.cli import render
 else:
     import importlib.util
     spec = importlib.util.spec_from_file_location("render_old", sys.argv[4])
@@ -147,7 +147,7 @@ def _fresh(which: str, data: Path, old_path: Path, out: Path) -> dict:
 
 def measure(spec: str, k: int, repeats: int, old, tmp: Path, fresh: int = 3) -> dict:
     import mesh
-    from cli import render
+    from stiefel_cmm.cli import render
 
     name, v, f = _mesh(spec)
     eb = mesh.eigenbasis(mesh.laplacian(mesh.load((v, f), warn=False)), k)
@@ -222,7 +222,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--fresh", type=int, default=3, help="fresh processes per renderer for the first-sheet time "
                    "(0: skip)")
-    p.add_argument("--old-rev", default=OLD_REV, help="git revision of the former cli/render.py")
+    p.add_argument("--old-rev", default=OLD_REV, help="git revision of the former stiefel_cmm.stiefel_cmm/cli/render.py")
     p.add_argument("--out-json", default=None)
     p.add_argument("--out-md", default=None, help="write the table with the machine header here")
     args = p.parse_args(argv)

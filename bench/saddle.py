@@ -30,8 +30,8 @@ import numpy as np  # noqa: E402
 import mesh  # noqa: E402
 from bench.environment import header_lines, run_meta, write_results  # noqa: E402
 from bench.meshes import load_mesh  # noqa: E402
-from objectives.cmm import compressed_modes, first_eigenpairs, unpack_laplacian  # noqa: E402
-from objectives.cmm_solvers import ADMMCMM, BlockCMM  # noqa: E402
+from objectives.cmm.modes import compressed_modes, first_eigenpairs, unpack_laplacian  # noqa: E402
+from objectives.cmm.solvers import ADMMCMM, BlockCMM  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ["example:bumpy", "example:starfish", "example:torus"]

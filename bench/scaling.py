@@ -7,7 +7,7 @@ A real mesh (default ``bunny.off``, 3 485 vertices, closed, genus 0) is midpoint
 size, in a fresh subprocess (so that its peak RSS is its own):
 
 * load/validation (``mesh.from_arrays``) and Laplacian assembly (cotangent W, lumped A, unit area);
-* ``eigsh`` shift-invert (``objectives.cmm.first_eigenpairs``) for k = 10 and k = 50 — skipped
+* ``eigsh`` shift-invert (``objectives.cmm.modes.first_eigenpairs``) for k = 10 and k = 50 — skipped
   when the time predicted from the previous size (exponent 1.5) exceeds ``--eigsh-budget``;
 * the CMM block solver (``stiefel.minimize``, Riemannian CG, Cholesky retraction, residual
   preconditioning by ``(W + λ₁A)⁻¹``, Huber smoothing δ = 1e-3, μ = 0.01·n, uniform
@@ -148,8 +148,8 @@ def worker(args) -> dict:
     """One size, in its own process: returns the row (printed as JSON by ``main``)."""
     import stiefel
     import mesh
-    from objectives.cmm import first_eigenpairs
-    from objectives.energies import cmm_energy
+    from objectives.cmm.modes import first_eigenpairs
+    from objectives.energy.energies import cmm_energy
 
     V, F, cached = subdivided(args.base, args.worker, Path(args.cache))
     row: dict = {"level": args.worker, "base": args.base, "mesh_cached": cached}
@@ -336,7 +336,7 @@ def markdown(meta, rows, exps, ks) -> str:
            f"μ = {meta['mu_factor']}·n, uniform weighting, eigenbasis start; {meta['iters']} iterations with "
            "gtol = 0 (fewer, at least 3, where a direct-solver run would exceed its time budget)",
            "* preconditioners: `library` = the library's `stiefel.shifted_inverse(W, A, λ₁)` "
-           f"(`stiefel.sparse_factor.SymmetricFactor`, backend `{meta.get('factor_backend', 'qdldl')}`; "
+           f"(`stiefel.linalg.sparse_factor.SymmetricFactor`, backend `{meta.get('factor_backend', 'qdldl')}`; "
            "skipped where its factorisation is predicted over budget; CHOLMOD does not report its factor's nnz); "
            "`superlu-colamd` = the same SuperLU factorisation with the COLAMD ordering (bench-side, "
            "`colamd_preconditioner`); `jacobi` = `diag(W + λ₁A)⁻¹`, O(n) (a 1-D array passed as `preconditioner=`)",
@@ -505,7 +505,7 @@ def main(argv=None):
         # predict the next size's eigsh time (×4 vertices, exponent 1.5)
         _predict(row, prior, rows)
     exps = exponents(rows, args.ks)
-    from stiefel.sparse_factor import default_backend
+    from stiefel.linalg.sparse_factor import default_backend
 
     dev = jax.devices()[0]
     meta = {"date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),

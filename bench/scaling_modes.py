@@ -60,8 +60,8 @@ def coarse_to_fine(base: str, level: int, k: int, cache: Path, mu: float, lap, p
     import mesh  # noqa: PLC0415
     from bench.scaling import subdivided  # noqa: PLC0415
     from bench.tails import tail_times  # noqa: PLC0415
-    from objectives.cmm import compressed_modes, first_eigenpairs, unpack_laplacian  # noqa: PLC0415
-    from objectives.cmm_solvers import BlockCMM  # noqa: PLC0415
+    from objectives.cmm.modes import compressed_modes, first_eigenpairs, unpack_laplacian  # noqa: PLC0415
+    from objectives.cmm.solvers import BlockCMM  # noqa: PLC0415
 
     Vc, Fc, _ = subdivided(base, level - 1, cache)
     Vf, _, _ = subdivided(base, level, cache)
@@ -90,7 +90,7 @@ def worker(base: str, level: int, k: int, cache: str, coarse_start: bool = False
     import mesh  # noqa: PLC0415
     from bench.scaling import subdivided  # noqa: PLC0415
     from bench.tails import tail_times  # noqa: PLC0415 — t₁: within 1e-3 of the final objective
-    from objectives.cmm import compressed_modes, first_eigenpairs, unpack_laplacian  # noqa: PLC0415
+    from objectives.cmm.modes import compressed_modes, first_eigenpairs, unpack_laplacian  # noqa: PLC0415
 
     V, F, _ = subdivided(base, level, Path(cache))
     m = mesh.load((V, F), warn=False)

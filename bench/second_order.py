@@ -89,7 +89,7 @@ class Brockett(eqx.Module):
     sqrt_d: jax.Array
 
     def __call__(self, X, args=None):
-        return stiefel.operators.quadratic_form(self.W, X * self.sqrt_d)
+        return stiefel.linalg.operators.quadratic_form(self.W, X * self.sqrt_d)
 
 
 def brockett_problem(n: int, k: int = 5, seed: int = 0) -> dict:
@@ -110,9 +110,9 @@ def brockett_problem(n: int, k: int = 5, seed: int = 0) -> dict:
 def cmm_problem(spec: str, k: int = 10) -> dict:
     import mesh  # noqa: PLC0415
     from bench.meshes import load_mesh  # noqa: PLC0415
-    from objectives.cmm import compressed_modes, first_eigenpairs, unpack_laplacian  # noqa: PLC0415
-    from objectives.cmm_solvers import BlockCMM  # noqa: PLC0415
-    from objectives.energies import cmm_energy  # noqa: PLC0415
+    from objectives.cmm.modes import compressed_modes, first_eigenpairs, unpack_laplacian  # noqa: PLC0415
+    from objectives.cmm.solvers import BlockCMM  # noqa: PLC0415
+    from objectives.energy.energies import cmm_energy  # noqa: PLC0415
 
     m, label = load_mesh(spec)
     lap = mesh.laplacian(m)
@@ -138,7 +138,7 @@ def solvers(problem: dict, gtol: float) -> dict:
     does (``gtol``, or a relative decrease ≤ 10⁻⁷ over 20 iterations), L-BFGS + P runs to ``gtol`` (or
     ``--max-steps``), TR + P alone (at most 3000 iterations), and "L-BFGS + P → TR + P" runs L-BFGS until
     its objective settles (relative decrease ≤ 10⁻¹⁰ over 50 iterations) and finishes with trust regions;
-    "P_X" is the CMM energy's curvature-aware point preconditioner (``objectives.cmm_newton``).
+    "P_X" is the CMM energy's curvature-aware point preconditioner (``objectives.cmm.newton``).
     """
     S = problem["S"]
     P = stiefel.shifted_inverse(problem["W"], problem["M"], problem["sigma"]).solve
@@ -154,11 +154,11 @@ def solvers(problem: dict, gtol: float) -> dict:
         return out
     stall = dict(ftol=1e-7, ftol_window=20, stall_test=True, history=5001)
     settle = dict(ftol=1e-10, ftol_window=50, stall_test=True, history=5001)
-    line = lambda F: stiefel.block_solver._Line(F, False)  # noqa: E731
+    line = lambda F: stiefel.solvers.block_solver._Line(F, False)  # noqa: E731
     cg = lambda F: stiefel.RiemannianCG(S, 0.0, gtol, preconditioner=P, line=line(F), **stall)  # noqa: E731
     lb = lambda F: stiefel.RiemannianLBFGS(S, 0.0, gtol, preconditioner=P, line=line(F), history=5001)  # noqa: E731
     lb_settle = lambda F: stiefel.RiemannianLBFGS(S, 0.0, gtol, preconditioner=P, line=line(F), **settle)  # noqa: E731
-    from objectives.cmm_newton import curvature_preconditioner  # noqa: PLC0415
+    from objectives.cmm.newton import curvature_preconditioner  # noqa: PLC0415
 
     a = jnp.asarray(problem["M"])
     trx = lambda F: stiefel.RiemannianTrustRegion(  # noqa: E731
@@ -339,7 +339,7 @@ def report(rows: list[dict], meta: dict) -> str:
              "trust regions alone crawl across it (TR + P: ~9000 iterations; L-BFGS + P comes within 1e-6 of the "
              "minimum in ~2400); after 2500 L-BFGS iterations TR + P finished in 65. There trust regions are a finish, "
              "not a replacement",
-             "* P_X (CMM only): the point preconditioner of `objectives.cmm_newton` — entries pinned in the "
+             "* P_X (CMM only): the point preconditioner of `objectives.cmm.newton` — entries pinned in the "
              "smoothing's kink (curvature μw_i s'' > σa_i) inverted by their own curvature, the free ones by P",
              *([f"* problems not rerun by this command: from {meta['earlier']['date']}, command "
                 f"`{meta['earlier']['command']}`"] if meta.get("earlier") else []), "",

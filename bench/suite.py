@@ -60,7 +60,7 @@ from bench.environment import write_atomic  # noqa: E402
 from bench.finish import manpg_problem  # noqa: E402
 from bench.meshes import SHARED, load_mesh  # noqa: E402
 from bench.suite_methods import METHODS, MU0, NEEDS_MESH, Problem, measure  # noqa: E402
-from stiefel.sparse_factor import default_backend  # noqa: E402
+from stiefel.linalg.sparse_factor import default_backend  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 REL = 1e-3

@@ -23,12 +23,12 @@ import scipy.sparse as sp
 
 import mesh
 import stiefel
-from objectives.admm import l1_weights_np, orthonormalize
-from objectives.cmm import compressed_modes, first_eigenpairs
-from objectives.cmm_solvers import ADMMCMM, BlockCMM, FastCMM, SequentialCMM
-from objectives.energies import cmm_energy
-from objectives.l1_optimality import l1_stationarity, support_stats
-from objectives.support_finish import SupportFinish
+from objectives.admm.splitting import l1_weights_np, orthonormalize
+from objectives.cmm.modes import compressed_modes, first_eigenpairs
+from objectives.cmm.solvers import ADMMCMM, BlockCMM, FastCMM, SequentialCMM
+from objectives.energy.energies import cmm_energy
+from objectives.energy.l1_optimality import l1_stationarity, support_stats
+from objectives.cmm.support_finish import SupportFinish
 
 BLOCK = {"block-cg-cholesky": ("cg", "cholesky"), "block-cg-cayley": ("cg", "cayley"),
          "block-cg-polar": ("cg", "polar"), "block-lbfgs-cholesky": ("lbfgs", "cholesky"),
@@ -143,7 +143,7 @@ def _from_cmm(res, curve=None) -> dict:
 
 
 def run_block_active_set(pb: Problem) -> dict:
-    """Block CG / Cholesky with the active-set preconditioner (``objectives.active_set``), via ``compressed_modes``."""
+    """Block CG / Cholesky with the active-set preconditioner (``objectives.cmm.active_set``), via ``compressed_modes``."""
     solver = BlockCMM(smoothing="f6", gtol=pb.args.gtol, ftol=pb.args.ftol, max_iters=pb.args.max_iters,
                       preconditioner="active_set", preconditioner_shift=pb.sigma)
     return _from_cmm(compressed_modes((pb.W, pb.a), pb.k, pb.mu, solver=solver, **pb.cmm_kwargs()))

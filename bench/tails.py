@@ -7,7 +7,7 @@ time after it, with the first-order stop alone and with the trust-region polish.
 For each mesh (k = 10, μ = 2λ_(k−1), area ℓ1 weights, eigenbasis start, the same start for every method):
 ``BlockCMM()`` (the default: the last stage ends at a relative decrease ≤ 1e-7 over 20 iterations, a stall
 test, its gradient norm far from 0), ``BlockCMM(polish="tr")`` (then trust regions with the curvature
-preconditioner to a relative Riemannian gradient norm 1e-8, ``objectives.cmm_newton``) and
+preconditioner to a relative Riemannian gradient norm 1e-8, ``objectives.cmm.newton``) and
 ``BlockCMM(polish="tr", ftol=1e-5)`` (the first-order part stopped earlier). Per run: the smoothed and
 true objectives, t₁ = seconds until the smoothed objective is within 1e-3 (relative) of the run's final
 one, the seconds after t₁ ("tail") and their ratio (issue 18's goal: tail ≤ 2·t₁ to a converged answer),
@@ -34,8 +34,8 @@ import numpy as np  # noqa: E402
 import mesh  # noqa: E402
 from bench.environment import header_lines, run_meta, write_results  # noqa: E402
 from bench.meshes import load_mesh  # noqa: E402
-from objectives.cmm import compressed_modes, first_eigenpairs, unpack_laplacian  # noqa: E402
-from objectives.cmm_solvers import BlockCMM  # noqa: E402
+from objectives.cmm.modes import compressed_modes, first_eigenpairs, unpack_laplacian  # noqa: E402
+from objectives.cmm.solvers import BlockCMM  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ["example:bumpy", "example:starfish", "example:torus"]

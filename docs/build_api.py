@@ -2,12 +2,12 @@
 
     python docs/build_api.py [--out docs/api]
 
-Documents every public module of ``stiefel``, ``objectives``, ``mesh`` and ``cli`` (no part of
+Documents every public module of ``stiefel``, ``objectives``, ``mesh`` and ``stiefel_cmm.cli`` (no part of
 the dotted name starts with ``_``); a package page shows what its ``__init__`` exports.
 pdoc links the names it can resolve and silently leaves the others as plain code, so this
 script checks the references itself: every dotted name in a backticked span of a public
 docstring that starts with one of the packages (``stiefel.minimize``,
-``objectives.cmm_solvers.BlockCMM``) must resolve by importing its longest module prefix and
+``objectives.cmm.solvers.BlockCMM``) must resolve by importing its longest module prefix and
 getattr'ing the rest. Broken ones are listed as ``file:line: name`` and the script exits 1.
 
 Needs only the working tree and pdoc (no test data, no JAX configuration changes).
@@ -29,7 +29,7 @@ from pathlib import Path
 from types import ModuleType
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("stiefel", "objectives", "mesh", "cli")
+PACKAGES = ("stiefel", "objectives", "mesh", "stiefel_cmm.cli")
 
 # Broken references in files their owners are editing right now, as (file, name): tolerated
 # until fixed there. Keep this empty otherwise.

@@ -32,53 +32,17 @@ Conventions: ``W`` is positive semi-definite (Def. 2.5.20; libigl's cotmatrix is
 JAX operators use float64 only if the caller enabled ``jax_enable_x64``.
 """
 
-from .descriptors import (
-    central_points,
-    constant,
-    deltas,
-    edge_graph,
-    extremal_points,
-    geodesic_distance,
-    geodists,
-    hks,
-    hks_times,
-    landmarks,
-    normdist,
-    scaled_to_unit_area,
-    vertex_positions,
-    wks,
-    wks_energies,
-)
+from .descriptors import (central_points, constant, deltas, edge_graph, extremal_points, geodesic_distance, geodists, hks, hks_times, landmarks, normdist, scaled_to_unit_area, vertex_positions, wks, wks_energies)
 from .eigen import Eigenbasis, eigenbasis
 from .examples import EXAMPLES, ExampleError, example, example_arrays
-from .errors import (
-    DegenerateMeshError,
-    EmptyMeshError,
-    IndexOutOfRangeError,
-    MeshCleaningWarning,
-    MeshError,
-    MeshFormatError,
-    MeshScaleError,
-    MultipleComponentsWarning,
-    NonFiniteVerticesError,
-    NonManifoldError,
-    NonTriangleFacesError,
-)
+from .errors import (DegenerateMeshError, EmptyMeshError, IndexOutOfRangeError, MeshCleaningWarning, MeshError, MeshFormatError, MeshScaleError, MultipleComponentsWarning, NonFiniteVerticesError, NonManifoldError, NonTriangleFacesError)
 from .io import CleaningReport, Mesh, face_areas, load
 from .isometry import is_isometric, isometry_defect
 from .laplacian import AREAS, WEIGHTS, Laplacian, area_matrix, laplacian, robust_laplacian
 from .laplacian_jax import laplacian_jax, mass_diagonal_jax, weight_operator_jax
 from .ordering import inverse_permutation, permutation_matrix, permute, reorder
 from .sampling import LocalFunctions, SamplingError, local_distance, local_functions, poisson_disk_sample
-from .segmentation import (
-    SegmentMatch,
-    SegmentMatchError,
-    Segmentation,
-    SegmentationError,
-    match_segments,
-    persistence_segmentation,
-    segment_indicators,
-)
+from .segmentation import (SegmentMatch, SegmentMatchError, Segmentation, SegmentationError, match_segments, persistence_segmentation, segment_indicators)
 
 __all__ = [
     "AREAS",

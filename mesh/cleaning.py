@@ -26,14 +26,7 @@ import numpy as np
 from jaxtyping import Float, Int
 
 from .arrays import unique_rows
-from .errors import (
-    DegenerateMeshError,
-    EmptyMeshError,
-    IndexOutOfRangeError,
-    MeshScaleError,
-    NonFiniteVerticesError,
-    NonManifoldError,
-)
+from .errors import (DegenerateMeshError, EmptyMeshError, IndexOutOfRangeError, MeshScaleError, NonFiniteVerticesError, NonManifoldError)
 from .topology import Topology, topology
 from .triangulate import as_polygons, triangulate
 

@@ -24,9 +24,9 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from jaxtyping import Float
 
-from stiefel.driver import Progress
-from stiefel.signs import canonical_signs
-from stiefel.sparse_factor import SymmetricFactor
+from stiefel.solvers.driver import Progress
+from stiefel.manifolds.signs import canonical_signs
+from stiefel.linalg.sparse_factor import SymmetricFactor
 from stiefel.validation import check_finite, check_number, is_integer
 
 from .errors import MeshError

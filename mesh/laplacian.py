@@ -2,7 +2,7 @@
 
 A ``Laplacian`` holds the weight matrix ``W`` (Ex. 2.5.22) and the area matrix
 ``A`` (Ex. 2.5.17) as ``scipy.sparse`` CSR matrices and, built on first use,
-as jittable JAX operators (``stiefel.operators.SparseOperator`` for ``W`` and
+as jittable JAX operators (``stiefel.linalg.operators.SparseOperator`` for ``W`` and
 a non-diagonal ``A``, ``DiagonalOperator`` for a diagonal ``A``).
 
 Sign convention: ``W`` is the *positive* semi-definite weight matrix of
@@ -91,7 +91,7 @@ class Laplacian:
 
     @cached_property
     def W_op(self):
-        """``W`` as a jittable ``stiefel.operators.SparseOperator`` (dtype: float64 if x64 is on)."""
+        """``W`` as a jittable ``stiefel.linalg.operators.SparseOperator`` (dtype: float64 if x64 is on)."""
         return self.operators()[0]
 
     @cached_property
@@ -106,7 +106,7 @@ class Laplacian:
         """
         import jax.numpy as jnp
 
-        from stiefel.operators import DiagonalOperator, SparseOperator
+        from stiefel.linalg.operators import DiagonalOperator, SparseOperator
 
         W_op = SparseOperator.from_scipy(self.W, factor=False, dtype=dtype)
         if self.is_diagonal_area:

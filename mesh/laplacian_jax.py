@@ -53,7 +53,7 @@ class _Pattern:
 
     @functools.cached_property
     def ell(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(cols (n, w), slot (nnz,))``: the ELL layout of ``stiefel.operators.SparseOperator``."""
+        """``(cols (n, w), slot (nnz,))``: the ELL layout of ``stiefel.linalg.operators.SparseOperator``."""
         rows = self.indices[:, 0]
         start = np.searchsorted(rows, np.arange(self.n))
         slot = np.arange(rows.size) - start[rows]
@@ -223,13 +223,13 @@ def laplacian_jax(
 
 
 def weight_operator_jax(V: Float[Array, "n 3"], F: Int[np.ndarray, "m 3"]):
-    """``W`` of ``laplacian_jax`` as a ``stiefel.operators.SparseOperator`` (ELL layout), differentiable in ``V``.
+    """``W`` of ``laplacian_jax`` as a ``stiefel.linalg.operators.SparseOperator`` (ELL layout), differentiable in ``V``.
 
     ``W (n, n)`` as ``cols, vals (n, w)``, ``w`` the largest row length, padded with column ``i``
     and value 0. Only ``mv`` and ``diagonal`` work: it holds no host CSR copy (``to_scipy``) and
     no factor (``solve``), since its values may be traced.
     """
-    from stiefel.operators import SparseOperator
+    from stiefel.linalg.operators import SparseOperator
 
     V, pat = _validate(V, F, "lumped")
     cols, slot = pat.ell

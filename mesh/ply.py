@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import MeshFormatError
-from .readers import RawMesh, decode_text
+from .raw import RawMesh, decode_text
 from .triangulate import Polygons
 
 __all__ = ["read_ply"]

@@ -26,44 +26,19 @@ import gzip
 import re
 import zlib
 from collections import Counter
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
-from jaxtyping import Float
 
 from .errors import EmptyMeshError, IndexOutOfRangeError, MeshFormatError
+from .ply import read_ply
+from .raw import _NOT_CONTROL, RawMesh, decode_text
 from .triangulate import Polygons
 
 __all__ = ["RawMesh", "read_mesh_file", "FORMATS"]
 
 FORMATS = ("obj", "off", "ply", "stl")
-
-
-@dataclass(frozen=True)
-class RawMesh:
-    """A file's contents before cleaning.
-
-    Attributes:
-      vertices: ``(n, 3)`` float64 positions as listed.
-      faces: polygons with 0-based indices into ``vertices``.
-      path, file_format, compressed, encoding: where it came from and how it was
-        decoded (``encoding`` is ``None`` for binary data).
-      face_line: 1-based line of input face ``f`` (``None`` where not known).
-      ignored: number of statements skipped (OBJ lines, points, curves, …) and
-        an example of them.
-    """
-
-    vertices: Float[np.ndarray, "n 3"]
-    faces: Polygons
-    path: str
-    file_format: str
-    compressed: bool = False
-    encoding: str | None = None
-    face_line: Callable[[int], int | None] = lambda f: None
-    ignored: int = 0
-    ignored_example: str | None = None
 
 
 def read_mesh_file(path: str | Path) -> RawMesh:
@@ -94,8 +69,6 @@ def read_mesh_file(path: str | Path) -> RawMesh:
     if not data.strip():
         raise EmptyMeshError("empty file; give a mesh file with vertices and faces", path=path)
     if fmt == "ply":
-        from .ply import read_ply
-
         raw = read_ply(data, path)
     elif fmt == "stl":
         raw = _read_stl(data, path)
@@ -104,27 +77,6 @@ def read_mesh_file(path: str | Path) -> RawMesh:
         raw = (_read_obj if fmt == "obj" else _read_off)(text, path)
         raw = replace(raw, encoding=encoding)
     return replace(raw, compressed=compressed)
-
-
-_CONTROL = re.compile(rb"[\x00-\x08\x0e-\x1f\x7f]")
-_NOT_CONTROL = bytes(b for b in range(256) if not _CONTROL.match(bytes([b])))
-
-
-def decode_text(data: bytes, path: Path, fmt: str) -> tuple[str, str]:
-    """``(text, encoding)``: UTF-8 (BOM stripped), else Latin-1; control bytes are refused."""
-    bad = _CONTROL.search(data) if data.translate(None, _NOT_CONTROL) else None  # translate: 10× faster scan
-    if bad:
-        line = data.count(b"\n", 0, bad.start()) + 1
-        raise MeshFormatError(
-            f"not a valid {fmt.upper()} file: binary byte 0x{data[bad.start()]:02x} at offset {bad.start()} "
-            f"in a text format (corrupt file, or another format renamed .{fmt}?)",
-            path=path,
-            line=line,
-        )
-    try:
-        return data.decode("utf-8-sig"), "utf-8"
-    except UnicodeDecodeError:
-        return data.decode("latin-1"), "latin-1"
 
 
 def _line_at(text: str, pos: int) -> int:

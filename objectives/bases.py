@@ -28,8 +28,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from stiefel.errors import ShapeError
-from stiefel.signs import canonical_signs
-from stiefel.sparse_factor import SymmetricFactor
+from stiefel.manifolds.signs import canonical_signs
+from stiefel.linalg.sparse_factor import SymmetricFactor
 from stiefel.validation import (check_count, check_finite, check_nonnegative, check_number, check_unit_interval)
 
 from .evaluation import per_vertex_error, reconstruct

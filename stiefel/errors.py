@@ -33,7 +33,7 @@ class RankDeficientError(OffManifoldError):
 
 class OutOfDomainError(StiefelError):
     """An operation outside its domain, e.g. ``log(X, Y)`` for points with no logarithm shorter than the
-    injectivity radius (``stiefel.geodesics``)."""
+    injectivity radius (``stiefel.manifolds.geodesics``)."""
 
 
 class SolverError(StiefelError):

@@ -1,4 +1,4 @@
-"""Test helpers around the library's slope tests (stiefel.checks): exact identities by jax.jvp on top."""
+"""Test helpers around the library's slope tests (stiefel.derivatives.checks): exact identities by jax.jvp on top."""
 
 from __future__ import annotations
 

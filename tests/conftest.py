@@ -10,7 +10,7 @@ from hypothesis import settings  # noqa: E402
 settings.register_profile("ci", derandomize=True, deadline=None, print_blob=True)
 settings.load_profile("ci")
 
-# The CLI caches compilations in the user's cache directory by default (cli.cache): the tests' CLI runs
+# The CLI caches compilations in the user's cache directory by default (stiefel_cmm.cli.cache): the tests' CLI runs
 # (in-process and subprocesses) run without it unless a test passes --cache-dir.
 import os  # noqa: E402
 

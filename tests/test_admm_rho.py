@@ -1,4 +1,4 @@
-"""ADMM's penalty ρ (``objectives.admm_rho``): the thesis variants' scale, two-way residual balancing, the
+"""ADMM's penalty ρ (``objectives.admm.rho``): the thesis variants' scale, two-way residual balancing, the
 scaled-dual invariant, per-step timings, Algorithm 8 in its printed form, and the option checks
 (docs/maths.md §5–6; thesis §2.4.2, Algorithms 3 and 8, Table 7.2)."""
 
@@ -9,14 +9,14 @@ import pytest
 import scipy.sparse as sp
 
 import mesh
-from cli.demo_mesh import demo_mesh
-from objectives.admm import ADMMOptions, admm, admm_sequential, orthonormalize, soft_threshold
-from objectives.admm_rho import STEPS, RhoRule, default_rho, penalty_scale
-from objectives.cmm import compressed_modes
-from objectives.cmm_solvers import ADMMCMM, FastCMM, SequentialADMMCMM, SolverOptionError
-from objectives.fast import _a_orthonormal_maximiser, _thesis_x_step, restricted_admm
+from stiefel_cmm.cli.demo_mesh import demo_mesh
+from objectives.admm.splitting import ADMMOptions, admm, admm_sequential, orthonormalize, soft_threshold
+from objectives.admm.rho import STEPS, RhoRule, default_rho, penalty_scale
+from objectives.cmm.modes import compressed_modes
+from objectives.cmm.solvers import ADMMCMM, FastCMM, SequentialADMMCMM, SolverOptionError
+from objectives.admm.fast import _a_orthonormal_maximiser, _thesis_x_step, restricted_admm
 from stiefel.errors import ParameterError
-from stiefel.sparse_factor import SymmetricFactor
+from stiefel.linalg.sparse_factor import SymmetricFactor
 
 K = 4
 

@@ -54,7 +54,7 @@ def test_build_succeeds_quietly(built: tuple[subprocess.CompletedProcess[str], P
 def test_key_pages_document_key_symbols(built: tuple[subprocess.CompletedProcess[str], Path, float]) -> None:
     _, out, _ = built
     index = (out / "index.html").read_text(encoding="utf-8")
-    for module in ("stiefel", "objectives", "objectives.cmm", "mesh", "mesh.laplacian", "cli"):
+    for module in ("stiefel", "objectives", "objectives.cmm.modes", "mesh", "mesh.laplacian", "stiefel_cmm.cli"):
         assert f">{module}</a>" in index, module
     for page, symbols in KEY_PAGES.items():
         html = (out / page).read_text(encoding="utf-8")
@@ -82,7 +82,7 @@ def test_no_broken_references() -> None:
 
 def test_public_modules_skip_private_ones() -> None:
     modules = build_api.public_modules()
-    assert {"stiefel", "stiefel.sharding", "objectives.cmm_solvers", "mesh.laplacian", "cli.main"} <= set(modules)
+    assert {"stiefel", "stiefel.solvers.sharding", "objectives.cmm.solvers", "mesh.laplacian", "stiefel_cmm.cli.main"} <= set(modules)
     assert not [m for m in modules if "._" in m]
 
 
@@ -99,16 +99,16 @@ def test_references_in_finds_project_names_and_their_lines() -> None:
 
 @pytest.mark.parametrize("name, ok", [
     ("stiefel.minimize", True),
-    ("stiefel.sharding.solve_sharded", True),
-    ("objectives.cmm_solvers.BlockCMM", True),
+    ("stiefel.solvers.sharding.solve_sharded", True),
+    ("objectives.cmm.solvers.BlockCMM", True),
     ("objectives.BlockCMM.solve", True),
     ("mesh.laplacian", True),
     ("mesh.Mesh.report", True),  # a field, no class attribute
     ("stiefel.minimise", False),
-    ("objectives.cmm_solvers.BlockCMMM", False),
+    ("objectives.cmm.solvers.BlockCMMM", False),
     ("mesh.report.lines", False),  # no module mesh.report
     ("objectives.no_such_module.f", False),
-    ("stiefel._compile", False),  # private
+    ("stiefel.runtime.compilation", False),  # private
 ])
 def test_resolves(name: str, ok: bool) -> None:
     assert build_api.resolves(name) is ok
@@ -117,12 +117,12 @@ def test_resolves(name: str, ok: bool) -> None:
 def test_a_broken_reference_fails_the_script(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                              capsys: pytest.CaptureFixture[str]) -> None:
     (tmp_path / "fake_api_module.py").write_text(
-        '"""Fake module: ``stiefel.minimize`` exists.\n\nBut ``objectives.cmm_solvers.BlockCMMM`` does not."""\n'
+        '"""Fake module: ``stiefel.minimize`` exists.\n\nBut ``objectives.cmm.solvers.BlockCMMM`` does not."""\n'
         "def _private():\n    '''``stiefel.nope`` is not checked: not rendered.'''\n")
     monkeypatch.syspath_prepend(str(tmp_path))
     monkeypatch.setattr(build_api, "public_modules", lambda: ["fake_api_module"])
     monkeypatch.setattr(build_api, "build", lambda out, modules: [])
     assert build_api.main(["--out", str(tmp_path / "api")]) == 1
     err = capsys.readouterr().err
-    assert "fake_api_module.py:3: objectives.cmm_solvers.BlockCMMM" in err
+    assert "fake_api_module.py:3: objectives.cmm.solvers.BlockCMMM" in err
     assert "stiefel.minimize" not in err and "stiefel.nope" not in err

@@ -1,4 +1,4 @@
-"""objectives.batch: a vmapped batch of CMM solves equals the same solves one at a time."""
+"""objectives.cmm.batch: a vmapped batch of CMM solves equals the same solves one at a time."""
 
 import jax
 import jax.numpy as jnp
@@ -7,8 +7,8 @@ import pytest
 
 import mesh
 import stiefel
-from objectives.batch import cmm_batch, cmm_problem, default_options
-from objectives.energies import cmm_energy
+from objectives.cmm.batch import cmm_batch, cmm_problem, default_options
+from objectives.energy.energies import cmm_energy
 
 from mesh_fixtures import shared_mesh
 

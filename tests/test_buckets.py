@@ -1,4 +1,4 @@
-"""Size buckets (``stiefel.buckets``, ``objectives.padding``): padded CMM problems give the unpadded
+"""Size buckets (``stiefel.runtime.buckets``, ``objectives.cmm.padding``): padded CMM problems give the unpadded
 answer, their padded rows stay exactly zero, and two meshes of one bucket share a compiled solver
 across processes (JAX's persistent cache)."""
 
@@ -14,11 +14,11 @@ import pytest
 import scipy.sparse as sp
 
 import stiefel
-from objectives.cmm import compressed_modes
-from objectives.cmm_base import SolverOptionError
-from objectives.cmm_solvers import BlockCMM
-from objectives.padding import PaddedProblem
-from stiefel.buckets import bucket, width_bucket
+from objectives.cmm.modes import compressed_modes
+from objectives.cmm.base import SolverOptionError
+from objectives.cmm.solvers import BlockCMM
+from objectives.cmm.padding import PaddedProblem
+from stiefel.runtime.buckets import bucket, width_bucket
 from stiefel_cases import grid_laplacian
 
 
@@ -45,8 +45,8 @@ def _grid(m):
 
 def test_padded_rows_stay_exactly_zero():
     """The gradient, the preconditioned direction and the retraction keep the padded rows at 0."""
-    from objectives.cmm_manifold import _shifted_inverse
-    from objectives.admm import orthonormalize
+    from objectives.cmm.manifold_solvers import _shifted_inverse
+    from objectives.admm.splitting import orthonormalize
 
     W, a = _grid(9)
     padded = PaddedProblem.build(W, a, 1.5)
@@ -94,8 +94,8 @@ _SAME_BUCKET = textwrap.dedent("""
     import numpy as np, scipy.sparse as sp
     sys.path.insert(0, "tests")
     from stiefel_cases import grid_laplacian
-    from objectives.cmm import compressed_modes
-    from objectives.cmm_solvers import BlockCMM
+    from objectives.cmm.modes import compressed_modes
+    from objectives.cmm.solvers import BlockCMM
     hits = []
     class Catch(logging.Handler):
         def emit(self, record):
@@ -107,14 +107,14 @@ _SAME_BUCKET = textwrap.dedent("""
     W = sp.csr_array(grid_laplacian(int(sys.argv[2])))
     a = np.full(W.shape[0], 1.0 / W.shape[0])
     r = compressed_modes((W, a), 3, 2.0, solver=BlockCMM(max_iters=60, bucket_growth=1.2))
-    from stiefel.program_cache import STATS
+    from stiefel.runtime.program_cache import STATS
     print(r.params["padded_size"], len(hits), STATS["loaded"])
 """)
 
 
 def test_meshes_of_one_bucket_share_the_compiled_solver(tmp_path):
     """A 400-vertex problem compiles; a 441-vertex one (same bucket) in a new process loads both solver
-    programs (stored, not traced again: ``stiefel.program_cache``) and their executables from the
+    programs (stored, not traced again: ``stiefel.runtime.program_cache``) and their executables from the
     persistent cache."""
     script = tmp_path / "run.py"
     script.write_text(_SAME_BUCKET)

@@ -32,7 +32,7 @@ def cmm():
 def test_every_cmm_energy_passes_gradient_and_hessian_checks(cmm, weighting):
     W, a, S, X = cmm
     E = objectives.cmm_energy(W, a, mu=2.0, eps=0.3, delta=0.3, runtime_smoothing=True, weighting=weighting)
-    for name in objectives.smoothings.NAMES:
+    for name in objectives.energy.smoothings.NAMES:
         F = E.with_params(smoothing=name)
         g = stiefel.check_gradient(F, S, X)
         h = stiefel.check_hessian(F, S, X)
@@ -124,10 +124,10 @@ def test_plot_writes_a_png(tmp_path, cmm):
 
 def test_fit_slope_on_synthetic_curves():
     t = np.logspace(-8, 0, 51)
-    slope, window, exact = stiefel.checks.fit_slope(t, 3.0 * t ** 2 + 1e-15, 1e-13)
+    slope, window, exact = stiefel.derivatives.checks.fit_slope(t, 3.0 * t ** 2 + 1e-15, 1e-13)
     assert abs(slope - 2.0) <= 0.02 and not exact and window is not None
-    assert stiefel.checks.fit_slope(t, np.full_like(t, 1e-16), 1e-13)[2]  # all at round-off
-    assert np.isnan(stiefel.checks.fit_slope(t, np.full_like(t, np.nan), 1e-13)[0])
+    assert stiefel.derivatives.checks.fit_slope(t, np.full_like(t, 1e-16), 1e-13)[2]  # all at round-off
+    assert np.isnan(stiefel.derivatives.checks.fit_slope(t, np.full_like(t, np.nan), 1e-13)[0])
 
 
 def test_optimistix_style_objectives_without_args(cmm):

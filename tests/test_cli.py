@@ -1,7 +1,7 @@
-"""The ``stiefel`` command line (cli.main): files, numbers and error reporting.
+"""The ``stiefel`` command line (stiefel_cmm.cli.main): files, numbers and error reporting.
 
-Most runs call ``cli.main.main([...])`` in-process (JAX compiles once per
-process); one run goes through ``python -m cli.main`` in a subprocess, and one
+Most runs call ``stiefel_cmm.cli.main.main([...])`` in-process (JAX compiles once per
+process); one run goes through ``python -m stiefel_cmm.cli.main`` in a subprocess, and one
 checks that a bad argument there gives one stderr line and no traceback. How the
 outputs are written (staging, lock, interrupts, full disk) is tested in
 ``test_cli_outputs.py``.
@@ -19,9 +19,9 @@ import numpy as np
 import pytest
 
 import mesh
-from cli.demo_mesh import demo_mesh
-from cli.main import main
-from cli.outputs import parse_mu
+from stiefel_cmm.cli.demo_mesh import demo_mesh
+from stiefel_cmm.cli.main import main
+from stiefel_cmm.cli.outputs import parse_mu
 
 #: the block solver's stopping at gtol = 1e-6 is not bit-reproducible run to run (the same
 #: command converged in 413 iterations once and hit 5000 the next); tests use a looser
@@ -114,7 +114,7 @@ def test_modes_demo_mesh(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     assert t["compile_s"] + t["solve_s"] + t["setup_s"] + t["write_s"] <= t["total_s"] * 1.001
     assert summary["compilation_cache"] is None  # STIEFEL_CACHE_DIR=off (conftest)
     assert summary["solver_options"] == {"max_iters": 800, "smoothing": "f6", "gtol": 1e-5}
-    # files by role, each with its size and SHA-256; exactly the files written (cli.run_dir)
+    # files by role, each with its size and SHA-256; exactly the files written (stiefel_cmm.cli.run_dir)
     assert {role: rec["name"] for role, rec in summary["files"].items()} == {
         "npz": "modes.npz", "ply": "modes.ply", "png": "modes.png"}
     for rec in summary["files"].values():
@@ -258,7 +258,7 @@ def test_bad_k(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
 @needs_hand
 def test_subprocess_module(tmp_path: Path) -> None:
     out = tmp_path / "sub"
-    cmd = [sys.executable, "-m", "cli.main", "modes", str(HAND), "-k", "3", "--no-png", "--json", *FAST,
+    cmd = [sys.executable, "-m", "stiefel_cmm.cli.main", "modes", str(HAND), "-k", "3", "--no-png", "--json", *FAST,
            "--out", str(out)]
     proc = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
@@ -267,15 +267,15 @@ def test_subprocess_module(tmp_path: Path) -> None:
     assert summary["parameters"]["mu"]["given"] == "2λ"
     assert summary["mu"] == pytest.approx(2 * summary["parameters"]["mu"]["eigenvalue"])
     assert (out / "modes.npz").is_file() and not (out / "modes.png").exists()
-    bad = subprocess.run([sys.executable, "-m", "cli.main", "modes", "--mu", "abc"], cwd=REPO,
+    bad = subprocess.run([sys.executable, "-m", "stiefel_cmm.cli.main", "modes", "--mu", "abc"], cwd=REPO,
                          capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and bad.stdout == ""
     _one_error_line(bad.stderr)
 
 
 def test_partial_columns(tmp_path: Path) -> None:
-    from cli.commands import _partial_writer
-    from cli.outputs import PartialColumns
+    from stiefel_cmm.cli.commands import _partial_writer
+    from stiefel_cmm.cli.outputs import PartialColumns
 
     lines: list[str] = []
     saver = PartialColumns(tmp_path / "modes.partial.npz", lines.append)
@@ -355,18 +355,18 @@ def test_ctrl_c_during_the_solve_writes_the_modes_reached(tmp_path: Path, capsys
     import os
     import signal
 
-    import cli.progress
+    import stiefel_cmm.cli.progress
 
     sent = []
 
-    class Interrupting(cli.progress.SolveProgress):
+    class Interrupting(stiefel_cmm.cli.progress.SolveProgress):
         def __call__(self, info):
             super().__call__(info)
             if info.iteration >= 20 and not sent:
                 sent.append(info.iteration)
                 os.kill(os.getpid(), signal.SIGINT)
 
-    monkeypatch.setattr("cli.commands.SolveProgress", Interrupting)
+    monkeypatch.setattr("stiefel_cmm.cli.commands.SolveProgress", Interrupting)
     out = tmp_path / "int"
     code = main(["modes", "-k", "3", "--mu", "0.01n", "--gtol", "1e-12", "--max-iters", "5000", "--no-png",
                  "--out", str(out)])
@@ -394,7 +394,7 @@ def test_a_corrupt_cache_never_crashes_a_run(tmp_path: Path) -> None:
     results = []
     for run in ("a", "b"):
         out = tmp_path / run
-        cmd = [sys.executable, "-m", "cli.main", "modes", "-k", "3", "--quiet", "--no-png", "--max-iters", "60",
+        cmd = [sys.executable, "-m", "stiefel_cmm.cli.main", "modes", "-k", "3", "--quiet", "--no-png", "--max-iters", "60",
                "--cache-dir", str(cache), "--out", str(out)]
         proc = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=300)
         assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr[-2000:]

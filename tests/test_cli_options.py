@@ -1,4 +1,4 @@
-"""The API's options on the command line (``cli.options``): Laplacian weights and areas, smoothing names
+"""The API's options on the command line (``stiefel_cmm.cli.options``): Laplacian weights and areas, smoothing names
 and aliases, continuation, optimiser, start (eigen / random / file), μ relative to λ, target sparsity,
 generated example meshes — and their named errors before any solve."""
 
@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 import mesh
-from cli.main import main
-from cli.outputs import parse_mu
+from stiefel_cmm.cli.main import main
+from stiefel_cmm.cli.outputs import parse_mu
 
 FAST = ["--gtol", "1e-5", "--max-iters", "400", "--no-png", "--quiet"]
 SMALL = "example:patch"  # 1681 vertices, one boundary loop

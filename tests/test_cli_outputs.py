@@ -2,7 +2,7 @@
 
 Runs use the built-in demo mesh with ``--method admm --max-iters 3`` (host numpy, no JAX
 compilation: a fraction of a second) and ``--no-png`` unless the picture is the point. Faults
-are injected where they happen: ``cli.run_dir._write_all`` (every staged byte goes through it)
+are injected where they happen: ``stiefel_cmm.cli.run_dir._write_all`` (every staged byte goes through it)
 for a full disk and for signals mid-write, in a child process where the signal is SIGKILL.
 """
 
@@ -22,9 +22,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import cli.run_dir as run_dir
-from cli.main import _Signals, build_parser, main
-from cli.run_dir import LOCK, STAGING_PREFIX
+import stiefel_cmm.cli.run_dir as run_dir
+from stiefel_cmm.cli.main import _Signals, build_parser, main
+from stiefel_cmm.cli.run_dir import LOCK, STAGING_PREFIX
 
 REPO = Path(__file__).resolve().parents[1]
 QUICK = ["--method", "admm", "--max-iters", "3", "--no-png", "--quiet"]
@@ -91,12 +91,12 @@ def test_no_png_after_png_removes_the_picture(tmp_path: Path) -> None:
 def test_failing_picture_still_commits_the_run(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                capsys: pytest.CaptureFixture) -> None:
     # the renderer running out of memory must not cost the solve: summary.json names what happened
-    import cli.render
+    import stiefel_cmm.cli.render
 
     def _oom(*args, **kwargs):
         raise MemoryError("cannot allocate the canvas")
 
-    monkeypatch.setattr(cli.render, "contact_sheet", _oom)
+    monkeypatch.setattr(stiefel_cmm.cli.render, "contact_sheet", _oom)
     out = tmp_path / "out"
     assert main(["modes", "-k", "2", *QUICK[:-2], "--quiet", "--out", str(out)]) == 0
     summary = _consistent(out)
@@ -117,7 +117,7 @@ def test_summary_hashes_match_and_json_is_the_summary(tmp_path: Path, capsys: py
 
 _CHILD = """
 import os, signal, sys
-import cli.run_dir as rd
+import stiefel_cmm.cli.run_dir as rd
 real, seen = rd._write_all, [0]
 def write_all(fd, data):
     seen[0] += memoryview(data).nbytes
@@ -125,7 +125,7 @@ def write_all(fd, data):
         os.kill(os.getpid(), signal.{sig})
     return real(fd, data)
 rd._write_all = write_all
-from cli.main import _entry
+from stiefel_cmm.cli.main import _entry
 sys.argv = ["stiefel"] + {argv!r}
 _entry()
 """
@@ -228,7 +228,7 @@ def test_signal_during_the_imports(sig: str, code: int, word: str, tmp_path: Pat
              f"    if name == 'jax': os.kill(os.getpid(), signal.{sig})\n"
              "    return real(name, *a, **k)\n"
              "builtins.__import__ = imp\n"
-             "from cli.main import _entry\n"
+             "from stiefel_cmm.cli.main import _entry\n"
              f"sys.argv = ['stiefel', 'eigs', '--out', {str(tmp_path / 'o')!r}]\n"
              "_entry()\n")
     proc = subprocess.run([sys.executable, "-c", child], cwd=REPO, capture_output=True, text=True, timeout=120)
@@ -251,7 +251,7 @@ def test_deferred_signal_is_raised_by_check() -> None:
 
 _GC_SIGNAL = """
 import gc, os, signal, sys, time
-from cli.main import _Signals
+from stiefel_cmm.cli.main import _Signals
 
 def spin(seconds):  # run Python bytecode, where pending signal handlers run
     end = time.monotonic() + seconds

@@ -7,9 +7,9 @@ import pytest
 import scipy.sparse as sp
 
 import mesh
-from objectives.admm import ADMMOptions, admm
-from objectives.cmm import compressed_modes, first_eigenpairs
-from objectives.cmm_solvers import ADMMCMM, BlockCMM, FastCMM, SequentialCMM, SolverOptionError
+from objectives.admm.splitting import ADMMOptions, admm
+from objectives.cmm.modes import compressed_modes, first_eigenpairs
+from objectives.cmm.solvers import ADMMCMM, BlockCMM, FastCMM, SequentialCMM, SolverOptionError
 
 MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
 pytestmark = pytest.mark.skipif(not MESHES.is_dir(), reason="shared meshes not available")
@@ -154,7 +154,7 @@ def hand_local():
 def test_fast_lemmas_7_1_2_and_7_1_3(hand, hand_local):
     """Lifted restricted eigenfunctions are A-orthonormal and their Dirichlet energies are the
     restricted eigenvalues, to 1e-10; restricted eigenvalues bound the true ones from above."""
-    from objectives.fast import restricted_eigenbasis
+    from objectives.admm.fast import restricted_eigenbasis
 
     _, lf = hand_local
     k = 8
@@ -167,7 +167,7 @@ def test_fast_lemmas_7_1_2_and_7_1_3(hand, hand_local):
 
 def test_fast_glmh_low_rank_term(hand, hand_local):
     """Algorithm 7 with Q = W + c·BBᵀ restricted without an n × n matrix equals the dense restriction."""
-    from objectives.fast import restricted_eigenbasis
+    from objectives.admm.fast import restricted_eigenbasis
 
     _, lf = hand_local
     B = hand.A @ mesh.eigenbasis(hand, 3).evecs
@@ -185,8 +185,8 @@ def test_restricted_admm_matches_a_dense_reference(hand, hand_local):
     (X = Ā^{-1/2} polar(Ā^{-1/2}B), dense E-step) iterate for iterate (hand_868, d = 200, 60 steps)."""
     import scipy.linalg as sla
 
-    from objectives.admm import soft_threshold
-    from objectives.fast import restricted_admm, restricted_matrices
+    from objectives.admm.splitting import soft_threshold
+    from objectives.admm.fast import restricted_admm, restricted_matrices
 
     _, lf = hand_local
     U, a, k, mu, rho, steps = lf.U, hand.A.diagonal(), 4, 0.01 * hand.n, 80.0, 60
@@ -227,7 +227,7 @@ def test_fast_method_is_a_reasonable_approximation(hand, hand_local):
 
 
 def test_fast_method_default_rho_is_twice_the_kth_restricted_eigenvalue(hand, hand_local):
-    from objectives.fast import restricted_eigenbasis
+    from objectives.admm.fast import restricted_eigenbasis
 
     _, lf = hand_local
     mu = 0.01 * hand.n
@@ -241,7 +241,7 @@ def test_fast_method_default_rho_is_twice_the_kth_restricted_eigenvalue(hand, ha
 
 @pytest.mark.slow
 def test_select_mu_brackets_a_target_sparsity(knight):
-    from objectives.cmm import select_mu
+    from objectives.cmm.modes import select_mu
 
     mu, res, trials = select_mu(knight, 3, 0.4, tol=0.08, max_evals=8, weighting="uniform",
                                 solver=BlockCMM(continuation=1, eps=1e-2, delta=1e-2, gtol=1e-5))
@@ -264,7 +264,7 @@ def test_sequential_callback_reports_each_column(knight):
 
 def test_active_set_preconditioner_matches_its_dense_definition(hand):
     """P_j = block-diagonal part of (W + σA + diag(c∘pinned_j))⁻¹: free rows solve K_FF, pinned rows 1/(K_ii + c_i)."""
-    from objectives.active_set import ActiveSetPreconditioner
+    from objectives.cmm.active_set import ActiveSetPreconditioner
 
     W, a = hand.W, hand.A.diagonal()
     n, k, mu, width = hand.n, 4, 0.01 * hand.n, 1e-3
@@ -324,7 +324,7 @@ def test_lbfgs_block_solver_agrees_with_cg(hand, preconditioner):
 
 def test_soft_threshold_is_the_l1_prox():
     """S-step: soft_threshold(v, t) = argmin_s t|s| + ½(s − v)² (checked on a fine grid)."""
-    from objectives.admm import soft_threshold
+    from objectives.admm.splitting import soft_threshold
 
     grid = np.linspace(-3.0, 3.0, 60001)
     for v, t in [(2.0, 0.5), (-1.2, 0.3), (0.2, 0.5), (0.0, 1.0), (-0.4, 0.4)]:

@@ -1,4 +1,4 @@
-"""The second-order finish of the smoothed CMM energy (objectives.cmm_newton) and point preconditioners
+"""The second-order finish of the smoothed CMM energy (objectives.cmm.newton) and point preconditioners
 (stiefel.PointPreconditioner): the curvature diagonal against a dense Hessian, the preconditioner SPD and
 symmetric, fewer Hessian products than the shifted preconditioner, and BlockCMM(polish="tr") reaching a
 gradient norm 1e-8 relative without raising the objective."""
@@ -13,10 +13,10 @@ import pytest
 
 import mesh
 import stiefel
-from objectives.cmm import compressed_modes, first_eigenpairs, unpack_laplacian
-from objectives.cmm_newton import curvature_diagonal, curvature_preconditioner
-from objectives.cmm_solvers import BlockCMM, SolverOptionError
-from objectives.energies import cmm_energy
+from objectives.cmm.modes import compressed_modes, first_eigenpairs, unpack_laplacian
+from objectives.cmm.newton import curvature_diagonal, curvature_preconditioner
+from objectives.cmm.solvers import BlockCMM, SolverOptionError
+from objectives.energy.energies import cmm_energy
 
 K = 6
 

@@ -1,4 +1,4 @@
-"""BlockCMM's saddle checks (objectives.cmm_saddle): on the small bumpy sphere the default solve without
+"""BlockCMM's saddle checks (objectives.cmm.saddle): on the small bumpy sphere the default solve without
 them stops on a saddle's plateau; with them it steps off along negative curvature and ends lower."""
 
 from __future__ import annotations
@@ -6,8 +6,8 @@ from __future__ import annotations
 import pytest
 
 import mesh
-from objectives.cmm import compressed_modes, first_eigenpairs, unpack_laplacian
-from objectives.cmm_solvers import ADMMCMM, BlockCMM, SolverOptionError
+from objectives.cmm.modes import compressed_modes, first_eigenpairs, unpack_laplacian
+from objectives.cmm.solvers import ADMMCMM, BlockCMM, SolverOptionError
 
 K = 10
 

@@ -1,4 +1,4 @@
-"""The CMM solver objects (``objectives.cmm_solvers``) and the thin ``compressed_modes(solver=...)``.
+"""The CMM solver objects (``objectives.cmm.solvers``) and the thin ``compressed_modes(solver=...)``.
 
 Reference values: objectives measured with the keyword API this replaced
 (``compressed_modes(lap, k, mu, method=..., <options>)``, commit 912ba04) on the built-in demo
@@ -15,10 +15,10 @@ import pytest
 
 import mesh
 import objectives
-from cli.demo_mesh import demo_mesh
+from stiefel_cmm.cli.demo_mesh import demo_mesh
 from objectives import cmm
-from objectives.cmm import METHODS, compressed_modes, select_mu
-from objectives.cmm_solvers import (SOLVERS, ADMMCMM, BlockCMM, CMMSolver, FastCMM, SequentialADMMCMM, SequentialCMM,
+from objectives.cmm.modes import METHODS, compressed_modes, select_mu
+from objectives.cmm.solvers import (SOLVERS, ADMMCMM, BlockCMM, CMMSolver, FastCMM, SequentialADMMCMM, SequentialCMM,
                                     SolverOptionError)
 
 K = 4
@@ -110,7 +110,7 @@ def test_each_solver_holds_only_its_own_options(demo):
                        "admm_sequential": SequentialADMMCMM, "fast": FastCMM}
     assert METHODS == tuple(SOLVERS)
     for name in ("BlockCMM", "SequentialCMM", "ADMMCMM", "SequentialADMMCMM", "FastCMM", "CMMSolver"):
-        assert getattr(objectives, name) is getattr(objectives.cmm_solvers, name)
+        assert getattr(objectives, name) is getattr(objectives.cmm.solvers, name)
 
 
 def test_solvers_are_immutable_values(demo):
@@ -133,7 +133,7 @@ def test_solvers_are_immutable_values(demo):
     assert f == FastCMM(U, rho=3.0) and hash(f) == hash(FastCMM(U, rho=3.0))
     assert f != FastCMM(U, rho=4.0) and f != FastCMM(U.copy(), rho=3.0)
     assert f.as_dict()["local_functions"] == U.shape and "local_functions=<" in repr(f)
-    assert ADMMCMM(variant="thesis", rho=5.0).admm_options() == objectives.admm.ADMMOptions(variant="thesis", rho=5.0)
+    assert ADMMCMM(variant="thesis", rho=5.0).admm_options() == objectives.admm.splitting.ADMMOptions(variant="thesis", rho=5.0)
 
 
 # ---------------------------------------------------------------------------- the thin entry point
@@ -180,7 +180,7 @@ REFERENCE = [  # solver, expected objective and iterations under the keyword API
     (lambda U: BlockCMM(optimizer="lbfgs", preconditioner="active_set", refresh=25, max_iters=600),
      99.44074625955675, 119),
     (lambda U: SequentialCMM(max_iters=4 * 150), 101.3680558571368, 74),  # a total (was 150 per mode)
-    # ρ's stall guard no longer raises ρ once the primal residual is within its tolerance (objectives.admm_rho):
+    # ρ's stall guard no longer raises ρ once the primal residual is within its tolerance (objectives.admm.rho):
     # converged in 826 iterations (was 980, objective 99.44072038357753, 4e-9 relative higher)
     (lambda U: ADMMCMM(max_iters=1500), 99.44072080719769, 826),
     (lambda U: ADMMCMM(variant="thesis", rho=100.0, adapt_rho=False, max_iters=400), 101.64362320413419, 400),

@@ -1,4 +1,4 @@
-"""Derivatives of compressed manifold modes (objectives.differentiable.cmm_solve) with respect to μ,
+"""Derivatives of compressed manifold modes (objectives.cmm.differentiable.cmm_solve) with respect to μ,
 a per-vertex ℓ1 weight, the smoothing width and the vertex positions (through mesh.laplacian_jax),
 against central finite differences of re-solved problems (docs/maths.md §9)."""
 
@@ -9,8 +9,8 @@ import pytest
 
 import mesh
 import stiefel
-from objectives.cmm import first_eigenpairs
-from objectives.differentiable import cmm_solve
+from objectives.cmm.modes import first_eigenpairs
+from objectives.cmm.differentiable import cmm_solve
 
 from mesh_fixtures import shared_mesh
 

@@ -1,4 +1,4 @@
-"""The host loop over compiled chunks (stiefel.driver): same iterates as one loop, bounded progress reports,
+"""The host loop over compiled chunks (stiefel.solvers.driver): same iterates as one loop, bounded progress reports,
 clean stops, no callback in the compiled program, and the persistent compilation cache serves it."""
 
 import math
@@ -15,7 +15,7 @@ import pytest
 
 from stiefel import (CallbackError, GeneralizedStiefel, Progress, Status, as_operator, minimize, shifted_inverse,
                      solve_block)
-from stiefel.block_solver import BlockOptions
+from stiefel.solvers.block_solver import BlockOptions
 
 from stiefel_cases import grid_laplacian, metric_matrix
 
@@ -113,7 +113,7 @@ def test_a_raising_callback_is_a_named_error_with_the_iterate(problem):
 def test_compiled_loop_has_no_host_callback(problem):
     """The chunk program of a problem with a sparse M and a sparse preconditioner calls no Python."""
     from stiefel import driver
-    from stiefel.block_solver import _NoArgs, solver_for
+    from stiefel.solvers.block_solver import _NoArgs, solver_for
 
     W, M, F, S, X0 = problem
     solver = solver_for(S, BlockOptions(max_iters=10), F=F, preconditioner=shifted_inverse(W, M, 0.1).solve)
@@ -124,8 +124,8 @@ def test_compiled_loop_has_no_host_callback(problem):
 
 
 def test_progress_and_stop_reach_the_block_cmm_stages():
-    from objectives.cmm import compressed_modes
-    from objectives.cmm_solvers import BlockCMM
+    from objectives.cmm.modes import compressed_modes
+    from objectives.cmm.solvers import BlockCMM
 
     W = grid_laplacian(9)
     a = np.full(W.shape[0], 1.0 / W.shape[0])
@@ -196,9 +196,9 @@ def test_every_cmm_solver_reports_progress_and_stops(method):
     """Progress reaches every CMM solver (ADMM ones a few times per second, the sequential one per column,
     the last report at the end); they stop on ``stop`` with the iterate reached (sequential: between columns)."""
     import mesh
-    from cli.demo_mesh import demo_mesh
-    from objectives.cmm import compressed_modes
-    from objectives.cmm_solvers import ADMMCMM, FastCMM, SequentialADMMCMM, SequentialCMM
+    from stiefel_cmm.cli.demo_mesh import demo_mesh
+    from objectives.cmm.modes import compressed_modes
+    from objectives.cmm.solvers import ADMMCMM, FastCMM, SequentialADMMCMM, SequentialCMM
 
     m = mesh.load(demo_mesh())
     lap = mesh.laplacian(m)
@@ -222,7 +222,7 @@ def test_every_cmm_solver_reports_progress_and_stops(method):
 
 
 def test_host_monitor_rate_limit_and_errors():
-    from stiefel.driver import HostMonitor
+    from stiefel.solvers.driver import HostMonitor
 
     calls = []
     mon = HostMonitor(calls.append, max_iters=100, method="x", interval=3600.0)

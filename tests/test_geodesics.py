@@ -1,4 +1,4 @@
-"""Exponential map, logarithm and distance of S_M (stiefel.geodesics) for both metrics: the geodesic
+"""Exponential map, logarithm and distance of S_M (stiefel.manifolds.geodesics) for both metrics: the geodesic
 equations by autodiff, the isometry X ↦ LᵀX with an explicit Cholesky factor, the ellipsoid's closed form,
 log ∘ exp = id, and the domain errors."""
 
@@ -114,7 +114,7 @@ def test_log_outside_its_domain():
 def test_expm_matches_scipy():
     import scipy.linalg as sla
 
-    from stiefel.geodesics import expm
+    from stiefel.manifolds.geodesics import expm
 
     rng = np.random.default_rng(9)
     for scale in (1e-6, 0.5, 4.0, 40.0):

@@ -153,7 +153,7 @@ def test_checker_rejects_the_thesis_gradient_slip():
 def test_preconditioned_residual_is_descent_and_vanishes_at_critical_points(kind):
     """ξ = proj_X(P R), R = G − MX sym(XᵀG): tangent, tr(Gᵀξ) = tr(RᵀPR) > 0, ξ = 0 at a critical point."""
     from stiefel import preconditioned_residual
-    from stiefel.manifold import sym
+    from stiefel.manifolds.manifold import sym
 
     M = metric_matrix(kind, N)
     S = GeneralizedStiefel(M, K)

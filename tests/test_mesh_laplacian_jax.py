@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import mesh
-from cli.demo_mesh import demo_mesh
+from stiefel_cmm.cli.demo_mesh import demo_mesh
 from mesh.laplacian_jax import AREAS_JAX
 from mesh_fixtures import SMALL, grid, shared_mesh
 

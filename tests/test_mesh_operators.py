@@ -11,7 +11,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import mesh  # noqa: E402
-from stiefel.operators import DiagonalOperator, SparseOperator  # noqa: E402
+from stiefel.linalg.operators import DiagonalOperator, SparseOperator  # noqa: E402
 from mesh_fixtures import SMALL, shared_mesh  # noqa: E402
 
 

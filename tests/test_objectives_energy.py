@@ -1,4 +1,4 @@
-"""Tests for objectives.energies: Dirichlet energy, CMM energy (Def. 3.2.10), compressed eigenvalues (Def. 3.2.15)."""
+"""Tests for objectives.energy.energies: Dirichlet energy, CMM energy (Def. 3.2.10), compressed eigenvalues (Def. 3.2.15)."""
 
 import jax
 
@@ -12,7 +12,7 @@ import scipy.sparse as sp  # noqa: E402
 
 import objectives  # noqa: E402
 from objectives import energies as E  # noqa: E402
-from stiefel.operators import DiagonalOperator, SparseOperator, as_operator  # noqa: E402
+from stiefel.linalg.operators import DiagonalOperator, SparseOperator, as_operator  # noqa: E402
 
 N, K = 40, 4
 
@@ -109,7 +109,7 @@ def test_l1_term_matches_reference(problem):
     eps, delta = 2e-3, 1e-3
     for name in ("f0", "f3", "huber", "logcosh"):
         term = E.l1_term(area, name, eps=eps, delta=delta)
-        s = objectives.smoothings.get(name, eps, delta)
+        s = objectives.energy.smoothings.get(name, eps, delta)
         ref = float(np.sum(area[:, None] * np.asarray(s(jnp.asarray(X)))))
         np.testing.assert_allclose(float(term(jnp.asarray(X))), ref, rtol=1e-13)
     np.testing.assert_allclose(
@@ -303,7 +303,7 @@ def test_cmm_line_matches_the_retraction_curve():
 
     import stiefel
     from objectives import cmm_energy
-    from stiefel.linesearch import along_curve
+    from stiefel.solvers.linesearch import along_curve
 
     rng = np.random.default_rng(5)
     n, k = 60, 4

@@ -105,7 +105,7 @@ def test_sparse_matvec_on_irregular_rows():
 
 
 def test_sparse_matvec_batches_and_differentiates_like_the_dense_product():
-    """``stiefel.ell``: the per-member batching rule and the JVP rule against the dense matrix."""
+    """``stiefel.linalg.ell``: the per-member batching rule and the JVP rule against the dense matrix."""
     rng = np.random.default_rng(5)
     A = sp.random(30, 30, density=0.15, random_state=6, format="csr")
     A = (A + A.T + sp.diags(rng.uniform(3, 4, 30))).tocsr()
@@ -173,7 +173,7 @@ def test_equal_matrices_give_equal_static_parts():
 
 @pytest.mark.parametrize("backend,reorder", [("cholmod", True), ("qdldl", True), ("superlu", True), ("superlu", False)])
 def test_symmetric_factor_solves_against_dense(backend, reorder):
-    from stiefel.sparse_factor import SymmetricFactor
+    from stiefel.linalg.sparse_factor import SymmetricFactor
 
     rng = np.random.default_rng(3)
     n = 40
@@ -197,7 +197,7 @@ def test_symmetric_factor_solves_against_dense(backend, reorder):
 def test_symmetric_factor_cholmod_is_the_default_and_falls_back_on_indefinite(capfd):
     """CHOLMOD (cholespy, a dependency) is the default; an indefinite matrix raises with
     ``check`` and is factored by LDLᵀ without it — the backend says which, stderr stays clean."""
-    from stiefel.sparse_factor import SymmetricFactor, default_backend, ldl_backend
+    from stiefel.linalg.sparse_factor import SymmetricFactor, default_backend, ldl_backend
 
     assert default_backend() == "cholmod"
     S = sp.csr_matrix(np.array([[2.0, 1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 0.0, 3.0]]))
@@ -213,7 +213,7 @@ def test_symmetric_factor_cholmod_is_the_default_and_falls_back_on_indefinite(ca
 
 @pytest.mark.parametrize("backend", ["qdldl", "superlu"])
 def test_symmetric_factor_rejects_indefinite_only_when_checking(backend):
-    from stiefel.sparse_factor import SymmetricFactor
+    from stiefel.linalg.sparse_factor import SymmetricFactor
 
     S = sp.csr_matrix(np.array([[2.0, 1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 0.0, 3.0]]))
     with pytest.raises(NotSPDError, match="non-positive pivot"):
@@ -227,7 +227,7 @@ def test_symmetric_factor_rejects_indefinite_only_when_checking(backend):
 @pytest.mark.parametrize("k", [None, 3, 40])
 def test_quadratic_form_value_and_derivatives(k):
     """tr(XᵀWX) and its custom JVP: gradient 2WX, Hessian 2W, derivative in W's values."""
-    from stiefel.operators import quadratic_form
+    from stiefel.linalg.operators import quadratic_form
 
     n = 50
     B = sp.random(n, n, density=0.1, random_state=0)

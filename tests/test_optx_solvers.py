@@ -60,7 +60,7 @@ def test_results_codes_and_throw(brockett):
     assert int(sol.stats["status"]) == Status.NON_FINITE
     res = stiefel.minimize(lambda X: bad(X, None), S, X0, max_iters=5)
     assert res.status_name == "non_finite"
-    assert stiefel.minimisers.to_optx_result(jnp.asarray(Status.LINE_SEARCH_FAILED)) == optx.RESULTS.nonlinear_divergence
+    assert stiefel.solvers.minimisers.to_optx_result(jnp.asarray(Status.LINE_SEARCH_FAILED)) == optx.RESULTS.nonlinear_divergence
 
 
 def test_runtime_values_do_not_recompile(brockett):

@@ -13,15 +13,15 @@ import scipy.sparse as sp
 
 import mesh
 import stiefel
-from cli.demo_mesh import demo_mesh
+from stiefel_cmm.cli.demo_mesh import demo_mesh
 from mesh.eigen import EigenInputError
 from mesh.errors import MeshError
 from objectives import bases
-from objectives.batch import cmm_batch
-from objectives.cmm import compressed_modes, select_mu
-from objectives.cmm_solvers import (ADMMCMM, BlockCMM, FastCMM, SequentialADMMCMM, SequentialCMM,
+from objectives.cmm.batch import cmm_batch
+from objectives.cmm.modes import compressed_modes, select_mu
+from objectives.cmm.solvers import (ADMMCMM, BlockCMM, FastCMM, SequentialADMMCMM, SequentialCMM,
                                     SolverOptionError)
-from objectives.differentiable import cmm_solve
+from objectives.cmm.differentiable import cmm_solve
 from stiefel import (NonFiniteError, ParameterError, RankDeficientError, RiemannianBB, RiemannianCG,
                      RiemannianLBFGS, StiefelError)
 

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 import mesh
-from objectives.admm import l1_weights_np
-from objectives.batch import cmm_batch, default_options
+from objectives.admm.splitting import l1_weights_np
+from objectives.cmm.batch import cmm_batch, default_options
 
 from mesh_fixtures import shared_mesh
 
@@ -54,8 +54,8 @@ def test_compressed_modes_float32(lap, method, rel_tol):
     to mix float64 operators into a float32 solve) and matches the float64 objective."""
     import jax.numpy as jnp
 
-    from objectives.cmm import compressed_modes
-    from objectives.cmm_solvers import SOLVERS
+    from objectives.cmm.modes import compressed_modes
+    from objectives.cmm.solvers import SOLVERS
 
     mu = 0.01 * lap.n
     solver = SOLVERS[method](max_iters=1200)  # a total: 300 per stage (4) or per column (K ≤ 4)

@@ -1,4 +1,4 @@
-"""Stored solver programs (``stiefel.program_cache``): keys that pin the program, no store for code the
+"""Stored solver programs (``stiefel.runtime.program_cache``): keys that pin the program, no store for code the
 key cannot pin, the same answer from a stored program, and corrupt entries ignored."""
 
 import functools
@@ -16,8 +16,8 @@ from stiefel import program_cache as pc
 
 
 def test_describe_pins_static_parts_and_refuses_unknown_code():
-    from objectives.energies import cmm_energy
-    from stiefel.operators import SparseOperator
+    from objectives.energy.energies import cmm_energy
+    from stiefel.linalg.operators import SparseOperator
     from stiefel_cases import grid_laplacian
 
     W = grid_laplacian(5)
@@ -59,7 +59,7 @@ def test_arrays_in_static_fields_are_described_by_content():
 
 @pytest.mark.skipif(bool(jax.config.jax_compilation_cache_dir), reason="JAX's persistent cache is on here")
 def test_no_store_without_jax_cache_dir():
-    from stiefel.driver import _init
+    from stiefel.solvers.driver import _init
 
     assert pc.store_dir() is None and pc.load_or_export(_init, (), None) is None
 
@@ -75,8 +75,8 @@ _RUN = textwrap.dedent("""
     import jax.numpy as jnp
     sys.path.insert(0, "tests")
     from stiefel_cases import grid_laplacian
-    from objectives.cmm import compressed_modes
-    from objectives.cmm_solvers import BlockCMM
+    from objectives.cmm.modes import compressed_modes
+    from objectives.cmm.solvers import BlockCMM
     from stiefel import program_cache, minimize, GeneralizedStiefel, as_operator
     W = sp.csr_array(grid_laplacian(int(sys.argv[2])))
     a = np.full(W.shape[0], 1.0 / W.shape[0])

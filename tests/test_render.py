@@ -1,4 +1,4 @@
-"""The PNG contact sheets (cli/render.py, cli/render_views.py, cli/raster.py): the z-buffer rasteriser paints the right
+"""The PNG contact sheets (stiefel_cmm.stiefel_cmm/cli/render.py, stiefel_cmm.stiefel_cmm/cli/render_views.py, stiefel_cmm.stiefel_cmm/cli/raster.py): the z-buffer rasteriser paints the right
 faces; meshes are oriented by their principal axes (a flat patch face-on, the same picture however the
 mesh is rotated) or by ``up=``; colours are symmetric about 0 with a colour bar and labelled rows and
 columns; the grid of smoothings × modes; rendering memory does not grow with the number of faces
@@ -16,8 +16,8 @@ import matplotlib.image as mpimg
 import numpy as np
 import pytest
 
-from cli.demo_mesh import demo_mesh
-from cli.render import (VIEWS, Layout, RenderOptionError, check_up, contact_sheet, grid_sheet, png_bytes,
+from stiefel_cmm.cli.demo_mesh import demo_mesh
+from stiefel_cmm.cli.render import (VIEWS, Layout, RenderOptionError, check_up, contact_sheet, grid_sheet, png_bytes,
                         principal_frame, rasterize)
 
 FRONT = (("front", 0.0, 0.0),)
@@ -143,7 +143,7 @@ def test_edges_find_orientation_and_boundary(monkeypatch: pytest.MonkeyPatch, bu
     # closed and oriented (cull back faces), or not; the boundary edges; the same in several passes
     from collections import Counter
 
-    import cli.raster as rv
+    import stiefel_cmm.cli.raster as rv
 
     monkeypatch.setattr(rv, "_EDGE_BUDGET", budget)
     v, f = _torus(12, 6)

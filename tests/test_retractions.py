@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from stiefel import GeneralizedStiefel, StiefelError
-from stiefel.retractions import cayley_dense
+from stiefel.manifolds.retractions import cayley_dense
 
 from checkers import check_retraction
 from stiefel_cases import M_KINDS, dense_of, metric_matrix

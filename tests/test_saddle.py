@@ -1,4 +1,4 @@
-"""stiefel.saddle: the most negative curvature (LOBPCG) against a dense Hessian, and the escape step."""
+"""stiefel.solvers.saddle: the most negative curvature (LOBPCG) against a dense Hessian, and the escape step."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 import scipy.linalg as sla
 
 import stiefel
-from stiefel.saddle import escape_step, negative_curvature
+from stiefel.solvers.saddle import escape_step, negative_curvature
 
 from stiefel_cases import metric_matrix
 

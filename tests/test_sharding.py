@@ -1,4 +1,4 @@
-"""stiefel.sharding: the block solver with X split by rows over 4 (virtual CPU) devices equals the
+"""stiefel.solvers.sharding: the block solver with X split by rows over 4 (virtual CPU) devices equals the
 single-device solver. The device count must be set before JAX starts, so the check runs in a
 subprocess with ``XLA_FLAGS=--xla_force_host_platform_device_count=4``."""
 
@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import stiefel
-from stiefel.sharding import shard_rows, solve_sharded
+from stiefel.solvers.sharding import shard_rows, solve_sharded
 
 from mesh_fixtures import shared_path
 
@@ -28,8 +28,8 @@ CHILD = textwrap.dedent(
     jax.config.update("jax_enable_x64", True)
     import jax.numpy as jnp, numpy as np
     import mesh, stiefel
-    from stiefel.sharding import solve_sharded
-    from objectives.batch import cmm_problem, default_options
+    from stiefel.solvers.sharding import solve_sharded
+    from objectives.cmm.batch import cmm_problem, default_options
 
     lap = mesh.laplacian(mesh.load(sys.argv[1]), weights="cotangent", area="lumped")
     problem, X0 = cmm_problem(lap, 4, weighting="uniform", preconditioner="jacobi")
@@ -44,7 +44,7 @@ CHILD = textwrap.dedent(
     sharded = solve_sharded(F, S, X0, opts, preconditioner=problem.precond)
     x = sharded.x
     try:
-        from stiefel.sharding import shard_rows
+        from stiefel.solvers.sharding import shard_rows
         shard_rows(jnp.ones((lap.n + 1, 2)), lap.n + 1)
         uneven = ""
     except stiefel.StiefelError as exc:

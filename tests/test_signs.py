@@ -1,4 +1,4 @@
-"""The sign convention (``stiefel.signs``): in every basis the toolkit returns, each column's
+"""The sign convention (``stiefel.manifolds.signs``): in every basis the toolkit returns, each column's
 entry of largest magnitude is positive — CMMs of every solver, batches, differentiable solves,
 eigenbases, GMH/LMH/Hamiltonian bases."""
 
@@ -12,10 +12,10 @@ import pytest
 import mesh
 import stiefel
 from objectives import bases
-from objectives.batch import cmm_batch
-from objectives.cmm import compressed_modes, first_eigenpairs, unpack_laplacian
-from objectives.cmm_solvers import ADMMCMM, BlockCMM, FastCMM, SequentialADMMCMM, SequentialCMM
-from objectives.differentiable import cmm_solve
+from objectives.cmm.batch import cmm_batch
+from objectives.cmm.modes import compressed_modes, first_eigenpairs, unpack_laplacian
+from objectives.cmm.solvers import ADMMCMM, BlockCMM, FastCMM, SequentialADMMCMM, SequentialCMM
+from objectives.cmm.differentiable import cmm_solve
 
 
 def _peaks_positive(X) -> bool:

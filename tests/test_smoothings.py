@@ -1,4 +1,4 @@
-"""Tests for objectives.smoothings: thesis Table 6.1, Def. 6.5.1, docs/maths.md §4 and note 5–6."""
+"""Tests for objectives.energy.smoothings: thesis Table 6.1, Def. 6.5.1, docs/maths.md §4 and note 5–6."""
 
 import functools
 

@@ -1,4 +1,4 @@
-"""Exact ℓ1 optimality (objectives.l1_optimality) and the exact-support finish (objectives.support_finish)."""
+"""Exact ℓ1 optimality (objectives.energy.l1_optimality) and the exact-support finish (objectives.cmm.support_finish)."""
 
 import numpy as np
 import pytest
@@ -8,10 +8,10 @@ import scipy.sparse as sp
 import mesh
 from mesh_fixtures import sphere
 from objectives import ADMMCMM, SolverOptionError, SupportFinish, compressed_modes, finish_support, l1_stationarity
-from objectives.admm import l1_weights_np
-from objectives.cmm import first_eigenpairs, unpack_laplacian
-from objectives.l1_optimality import MaskedGram, support_stats
-from objectives.support_finish import _Restricted, true_objective
+from objectives.admm.splitting import l1_weights_np
+from objectives.cmm.modes import first_eigenpairs, unpack_laplacian
+from objectives.energy.l1_optimality import MaskedGram, support_stats
+from objectives.cmm.support_finish import _Restricted, true_objective
 
 K = 4
 
@@ -59,7 +59,7 @@ def test_masked_gram_solves_its_map():
 def test_masked_gram_matrix_free_path_matches_the_dense_one(monkeypatch):
     """Large k solves the map by CG (the dense inverse is O(k⁶)): same Λ, also with a pair of columns whose
     masked supports are disjoint (a dead multiplier entry, 0 on both paths)."""
-    import objectives.l1_optimality as l1
+    import objectives.energy.l1_optimality as l1
 
     rng = np.random.default_rng(5)
     n, k = 60, 7

@@ -1,4 +1,4 @@
-"""``cli.viewer``: the self-contained HTML viewer (``write_viewer``) and ``stiefel view`` (``run_view``).
+"""``stiefel_cmm.cli.viewer``: the self-contained HTML viewer (``write_viewer``) and ``stiefel view`` (``run_view``).
 
 Meshes are small ellipsoids (``demo_mesh(1)``: 42 vertices) written into npz files here, like those of
 ``stiefel modes``/``stiefel eigs``. The ``browser`` test opens a page in headless Chromium (Debian's
@@ -23,8 +23,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import cli.viewer as viewer
-from cli.viewer import VIEW_NAME, ViewerError, add_parser, decimate, load_run, run_view, write_viewer
+import stiefel_cmm.cli.viewer as viewer
+from stiefel_cmm.cli.viewer import VIEW_NAME, ViewerError, add_parser, decimate, load_run, run_view, write_viewer
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -196,7 +196,7 @@ def test_write_viewer_bad_input(tmp_path: Path, case: str, match: str) -> None:
 
 
 def test_import_is_light() -> None:
-    code = ("import sys, cli.viewer; heavy = {'numpy', 'scipy', 'plotly', 'jax', 'fast_simplification'} "
+    code = ("import sys, stiefel_cmm.cli.viewer; heavy = {'numpy', 'scipy', 'plotly', 'jax', 'fast_simplification'} "
             "& set(sys.modules); assert not heavy, heavy")
     subprocess.run([sys.executable, "-c", code], cwd=REPO, check=True, timeout=60)
 
@@ -412,7 +412,7 @@ def test_default_camera_faces_a_flat_patch_and_honours_up() -> None:
     import numpy as np
 
     import mesh
-    from cli.viewer import default_camera
+    from stiefel_cmm.cli.viewer import default_camera
 
     m = mesh.example("patch")
     cam = default_camera(m.vertices, m.faces)

@@ -8,7 +8,7 @@ area to 1, so μ means the same on a coarse and a fine copy of a surface (``‖A
 
 CMMs are solved by calling the ADMM solver object directly (``ADMMCMM.solve``) rather than through
 ``compressed_modes``: the latter's ℓ1 stationarity diagnostic builds a ``k(k+1)/2``-square matrix
-(``objectives.l1_optimality.MaskedGram``) — 11325² entries and minutes of work at k = 150.
+(``objectives.energy.l1_optimality.MaskedGram``) — 11325² entries and minutes of work at k = 150.
 """
 
 from __future__ import annotations
@@ -21,10 +21,10 @@ import numpy as np
 import mesh
 from bench.bench_bases import MU_PERP, MU_R, _best
 from objectives import bases as basis_lib
-from objectives.cmm import unpack_laplacian
-from objectives.cmm_solvers import ADMMCMM, Start
+from objectives.cmm.modes import unpack_laplacian
+from objectives.cmm.solvers import ADMMCMM, Start
 from objectives.evaluation import a_orthonormalize, principal_angles, reconstruct, reconstruction_error
-from stiefel.signs import canonical_signs
+from stiefel.manifolds.signs import canonical_signs
 
 __all__ = ["FUNCTIONS", "CMMRun", "solve_cmm", "mu_sweep", "Chapter4", "chapter4", "reconstruction_table",
            "method_sweep", "incremental_errors", "grassmann_matrix", "grassmann_unit_gl", "basis_reconstruction",

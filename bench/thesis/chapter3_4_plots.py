@@ -1,5 +1,5 @@
 """Figures of ``bench.thesis.chapter3_4`` (matplotlib, Agg): each returns a ``Figure`` for
-``Context.save_figure``. The mode pictures of Fig. 3.5 come from ``cli.render.grid_sheet``."""
+``Context.save_figure``. The mode pictures of Fig. 3.5 come from ``stiefel_cmm.cli.render.grid_sheet``."""
 
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ def mu_figure(m, fields, mu_labels, table) -> plt.Figure:
     """Fig. 3.5: the modes (rows μ, columns modes) and sparsity / support / energy against μ/n."""
     from PIL import Image
 
-    from cli.render import grid_sheet
+    from stiefel_cmm.cli.render import grid_sheet
 
     buf = io.BytesIO()
     k = fields[0].shape[1]

@@ -19,8 +19,8 @@ import mesh
 from bench.thesis import Claim
 from bench.thesis.chapter5_6_util import decimate, marker_plot, principal_axes, refine_half, twist
 from objectives import bases, fmaps
-from objectives.cmm import compressed_modes
-from objectives.cmm_solvers import ADMMCMM
+from objectives.cmm.modes import compressed_modes
+from objectives.cmm.solvers import ADMMCMM
 from objectives.evaluation import RankDeficientWarning
 
 __all__ = ["claims"]

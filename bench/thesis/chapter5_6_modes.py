@@ -16,10 +16,10 @@ import scipy.linalg as sla
 import mesh
 from bench.thesis import Claim
 from bench.thesis.chapter5_6_util import decimate, sheet_figure
-from cli.compare import match_modes
+from stiefel_cmm.cli.compare import match_modes
 from objectives import smoothings
-from objectives.cmm import compressed_modes, first_eigenpairs, unpack_laplacian
-from objectives.cmm_solvers import SequentialCMM
+from objectives.cmm.modes import compressed_modes, first_eigenpairs, unpack_laplacian
+from objectives.cmm.solvers import SequentialCMM
 
 __all__ = ["fig_6_9", "figs_6_10_6_11", "fig_6_12"]
 
@@ -29,7 +29,7 @@ CORR = 0.9  # a mode "has a partner" in another run when their matched |⟨ψ, �
 
 
 def fig_6_9(ctx) -> Claim:
-    """Naive ``ε log cosh(x/ε)`` against ``objectives.smoothings.f8`` on ``x ∈ [1e-12, 1e10]``."""
+    """Naive ``ε log cosh(x/ε)`` against ``objectives.energy.smoothings.f8`` on ``x ∈ [1e-12, 1e10]``."""
     import matplotlib.pyplot as plt
 
     t0 = time.perf_counter()
@@ -62,7 +62,7 @@ def fig_6_9(ctx) -> Claim:
         key="Fig. 6.9", subject="the naive f8 = ε log cosh(x/ε) overflows to ∞; the stable form does not",
         thesis="|f_*(x) − |x|| for x ∈ [1e-12, 1e10], ε = δ = 1e-3: f8 becomes undefined once cosh(x/ε) = ∞",
         ours=(f"naive f8 (float64) is ∞ on the grid from x = {first_inf:.4g} (x/ε = {first_inf / EPS:.1f}; cosh "
-              f"overflows for x/ε > {np.log(np.finfo(float).max) + np.log(2.0):.2f}) to 1e10; objectives.smoothings "
+              f"overflows for x/ε > {np.log(np.finfo(float).max) + np.log(2.0):.2f}) to 1e10; objectives.energy.smoothings "
               f"f1–f9 {'finite' if finite else 'NOT finite'} on the whole grid; f8(10) = 10 − ε log 2 to {tail:.1e}")
         if first_inf is not None else "naive f8 stayed finite on the grid",
         setting="2201 log-spaced x in [1e-12, 1e10], float64 numpy (naive) and JAX (ours); no mesh",

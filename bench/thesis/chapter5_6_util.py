@@ -73,12 +73,12 @@ def refine_half(m: mesh.Mesh) -> tuple[mesh.Mesh, np.ndarray]:
 
 
 def sheet_figure(vertices, faces, grids: list[tuple[str, list, list, list]]):
-    """A matplotlib figure stacking ``cli.render.grid_sheet`` pictures: each grid is
+    """A matplotlib figure stacking ``stiefel_cmm.cli.render.grid_sheet`` pictures: each grid is
     ``(title, fields (list of (n, c) arrays, one per row), row titles, column titles)``."""
     import matplotlib.pyplot as plt
     from PIL import Image
 
-    from cli.render import grid_sheet
+    from stiefel_cmm.cli.render import grid_sheet
 
     images = []
     for _, fields, rows, cols in grids:

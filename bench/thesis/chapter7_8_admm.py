@@ -18,11 +18,11 @@ import scipy.sparse as sp
 import mesh
 from bench.thesis import Claim
 from bench.thesis.chapter7_8_util import mode_sheet, pct, pick_mesh, sized_local_functions, timed
-from cli.compare import match_modes
-from objectives.cmm import compressed_modes, unpack_laplacian
-from objectives.cmm_solvers import ADMMCMM, FastCMM
-from objectives.fast import restricted_matrices
-from stiefel.sparse_factor import SymmetricFactor
+from stiefel_cmm.cli.compare import match_modes
+from objectives.cmm.modes import compressed_modes, unpack_laplacian
+from objectives.cmm.solvers import ADMMCMM, FastCMM
+from objectives.admm.fast import restricted_matrices
+from stiefel.linalg.sparse_factor import SymmetricFactor
 
 __all__ = ["runs", "pairs", "table_7_1", "table_7_2", "fig_7_5", "SOLVERS"]
 
@@ -273,7 +273,7 @@ def fig_7_5(ctx, data: dict) -> Claim:
     return Claim(key="Fig. 7.5", subject="CMMs via the fast approximation vs unrestricted ADMM",
                  thesis="pictures (fandisk, ScapeMan001): the functions are very similar, with some change in ordering",
                  ours=ours, setting="Table 7.1's runs, first random start (ADMM and fast from different random "
-                 "starts); modes sorted by compressed eigenvalue, the fast ones matched to ADMM's (cli.compare.match_modes)",
+                 "starts); modes sorted by compressed eigenvalue, the fast ones matched to ADMM's (stiefel_cmm.cli.compare.match_modes)",
                  verdict="reproduced" if similar else ("qualitatively" if parts and max(share) >= 0.8 else "differs"),
                  reason=reason + ("" if similar else "; from different random starts the two solvers can end in "
                                   "different local minima"),

@@ -14,10 +14,10 @@ import mesh
 from bench.thesis import Claim
 from bench.thesis.chapter7_8_util import pick_mesh
 from objectives import bases
-from objectives.cmm import compressed_modes
-from objectives.cmm_solvers import ADMMCMM, SequentialCMM
+from objectives.cmm.modes import compressed_modes
+from objectives.cmm.solvers import ADMMCMM, SequentialCMM
 from objectives.evaluation import principal_angles, reconstruct, reconstruction_error
-from objectives.l1_optimality import l1_stationarity
+from objectives.energy.l1_optimality import l1_stationarity
 
 __all__ = ["isometry", "reconstruction", "stiefel_properties", "sequential", "algorithm_8", "cmm_subspace"]
 

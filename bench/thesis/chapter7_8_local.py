@@ -1,7 +1,7 @@
 """Thesis §7.1 for ``bench.thesis.chapter7_8``: local functions and the restricted eigenproblem (Algorithm 7).
 
 One spectrum on fandisk — eigs (``mesh.eigenbasis``) against the restricted eigenpairs on d ≈ 2k local
-functions (``objectives.fast.restricted_eigenbasis``), k = 500 as in the thesis (quick: k = 40 on 642
+functions (``objectives.admm.fast.restricted_eigenbasis``), k = 500 as in the thesis (quick: k = 40 on 642
 vertices) — gives Lemmas 7.1.2/7.1.3, the 7–15 coverage, Fig. 7.1 (eigenvalues) and Fig. 7.2
 (eigenfunctions); Fig. 7.3 times eigs against the fast approximation on three meshes (k = 200, d ≈ 400;
 fandisk's k = 500 run added).
@@ -18,8 +18,8 @@ import scipy.sparse as sp
 import mesh
 from bench.thesis import Claim
 from bench.thesis.chapter7_8_util import fmt_s, guarded, mode_sheet, pick_mesh, sized_local_functions, timed
-from cli.compare import match_modes
-from objectives.fast import restricted_eigenbasis, restricted_matrices
+from stiefel_cmm.cli.compare import match_modes
+from objectives.admm.fast import restricted_eigenbasis, restricted_matrices
 
 __all__ = ["claims"]
 
@@ -189,7 +189,7 @@ def fig_7_2(ctx, s: dict) -> Claim:
                  thesis="a picture (fandisk): restricted eigenfunctions resemble eigs' at low frequency and lose "
                  "accuracy at higher ones",
                  ours=ours, setting=_setting(s) + "; restricted functions matched to eigs' by maximum |A-inner "
-                 "product| (cli.compare.match_modes)", verdict="reproduced" if good else "differs",
+                 "product| (stiefel_cmm.cli.compare.match_modes)", verdict="reproduced" if good else "differs",
                  reason=("the low-frequency functions are reproduced, the high ones are not: span(U) cannot hold "
                          "them (its residual grows with the index), so the picture's trend is measured") if good
                  else f"fewer than 90 % of the first {low} eigenfunctions have a restricted partner, or the error "

@@ -15,7 +15,7 @@ from bench.thesis import Claim
 from bench.thesis.chapter7_8_util import guarded, pick_mesh, sized_local_functions
 from objectives import bases
 from objectives.evaluation import principal_angles
-from objectives.fast import restricted_eigenbasis
+from objectives.admm.fast import restricted_eigenbasis
 
 __all__ = ["claims"]
 

@@ -78,12 +78,12 @@ def timed(fn, *args, **kwargs):
 
 
 def mode_sheet(ctx, m: mesh.Mesh, rows: list, row_titles: list, col_titles: list, name: str, title: str) -> str:
-    """Render ``rows`` (a list of ``(n, c)`` fields) as one sheet (``cli.render.grid_sheet``: one row per
+    """Render ``rows`` (a list of ``(n, c)`` fields) as one sheet (``stiefel_cmm.cli.render.grid_sheet``: one row per
     field set, one column per function, colours symmetric per panel) and save it as ``name``."""
     import matplotlib.pyplot as plt
     from PIL import Image
 
-    from cli.render import grid_sheet
+    from stiefel_cmm.cli.render import grid_sheet
 
     buf = io.BytesIO()
     grid_sheet(buf, np.asarray(m.vertices), np.asarray(m.faces), rows, row_titles=row_titles,
