@@ -1,90 +1,77 @@
-"""One entry point for the benchmarks: ``python -m bench <name> [args]``.
+"""The one entry point of the benchmarks: ``python -m bench <name> [args]``.
 
-    python -m bench --list                 # the benchmarks and whether each is present
-    python -m bench suite --mesh fandisk.off
-    python -m bench scaling
-    python -m bench stiefel --help
+    python -m bench --help                 # the benchmarks, one line each
+    python -m bench suite                  # every CMM solver on a generated mesh
+    python -m bench suite --mesh fandisk.off --repeats 1
+    python -m bench scaling --help         # a benchmark's own options
 
-Each benchmark is a module with ``main(argv=None)``, imported only when it is run (most of
-them switch JAX to float64 at import, as applications may). ``python -m bench.<module>``
-keeps working for every module.
+Each benchmark is a module with ``main(argv=None)``, imported only when it is run (most of them switch JAX to
+float64 at import, as applications may). Its results go to ``docs/benchmarks/<name>.md`` and ``<name>.json``
+(``bench.environment``); the defaults need no file outside the repository, and a mesh input that does not
+exist stops the run with a one-line message before anything is measured or written.
 """
 
 from __future__ import annotations
 
 import importlib
-import importlib.util
 import sys
 from typing import Sequence
 
-# name -> (module, one-line description); descriptions are kept here so that --list imports nothing
+# name -> (module, one line: what it measures); kept here so that --help imports nothing
 BENCHMARKS: dict[str, tuple[str, str]] = {
-    "suite": ("bench.suite", "all CMM solvers side by side on meshes and ManPG's 1-D problem: objective, exact zeros, time, ratios to ADMM"),
-    "scaling": ("bench.scaling", "subdivided surfaces up to ~1e6 vertices: assembly, eigsh, ms/iteration, exponents"),
-    "scaling-modes": ("bench.scaling_modes", "the default CMM solve (stiefel modes) on subdivided meshes up to ~10⁶ vertices: total vs eigsh, peak RSS (issue 18)"),
-    "stiefel": ("bench.bench_stiefel", "manifold layer, mu = 0 on grid Laplacians (issue 2)"),
-    "mesh": ("bench.bench_mesh", "mesh layer: load, Laplacian assembly, eigenbasis, W @ X (issue 3)"),
-    "cmm": ("bench.bench_cmm", "block manifold solver vs ADMM on the shared meshes (issue 4)"),
-    "bases": ("bench.bench_bases", "bases and functional maps (issue 5)"),
-    "batch": ("bench.bench_batch", "batched solves (issue 7, batching)"),
-    "precision": ("bench.bench_precision", "float32 vs float64 (issue 7, precision)"),
-    "autodiff": ("bench.bench_autodiff", "implicit derivatives through CMM solves: backward vs forward (issue 16)"),
-    "penalty": ("bench.bench_penalty", "penalty baseline (jaxopt L-BFGS + projection) vs the manifold solvers"),
-    "first-run": ("bench.first_run", "whole stiefel processes: cold/warm cache, size buckets, progress (issue 17)"),
-    "reliability": ("bench.reliability", "issue 19's fault catalogue: bad input, faults, loads -> docs/RELIABILITY.md"),
-    "defaults": ("bench.defaults", "sparsity and support sizes of the CLI's default modes per mu rule (issue 21)"),
-    "second-order": ("bench.second_order", "trust regions vs CG / L-BFGS / pymanopt: Brockett and CMM final stages (issue 22)"),
-    "finish": ("bench.finish", "exact-support finish: block / ADMM with and without it, exact zeros, ℓ1 residual (issue 18)"),
-    "thesis": ("bench.thesis.report", "the thesis reproduced claim by claim -> docs/THESIS.md (issue 20; --quick)"),
-    "admm-rho": ("bench.admm_rho", "ADMM's penalty rho: increase-only vs two-way balancing, both variants, full and fast; per-step ms"),
-    "saddle": ("bench.saddle", "saddle checks: block with and without them against ADMM, θ of each check (issue 18)"),
-    "tails": ("bench.tails", "slow tails: time to within 1e-3 of the final objective vs after it, stall stop vs trust-region polish (issue 18)"),
-    "peers": ("bench.peers", "per-iteration cost of Riemannian CG: ours (each retraction) vs pymanopt (issue 18)"),
-    "render-cost": ("bench.render_cost", "PNG contact sheet: former vs current renderer, seconds per sheet (k = 10)"),
+    "suite": ("bench.suite", "every CMM solver side by side on meshes and ManPG's 1-D problem: objective, exact "
+                             "zeros, time, ratios to ADMM"),
+    "cmm": ("bench.bench_cmm", "the block manifold solver's variants against ADMM: time to ADMM's best objective"),
+    "scaling": ("bench.scaling", "subdivided surfaces up to ~10⁶ vertices: assembly, eigsh, ms per iteration, "
+                                 "fitted exponents, memory"),
+    "scaling-modes": ("bench.scaling_modes", "the default CMM solve (as `stiefel modes` runs it) on subdivided "
+                                             "meshes: total time against eigsh, peak memory"),
+    "stiefel": ("bench.bench_stiefel", "manifold layer at μ = 0 on grid Laplacians: solvers, retractions, "
+                                       "preconditioning against eigsh"),
+    "peers": ("bench.peers", "Riemannian CG per iteration, each retraction, against pymanopt's"),
+    "second-order": ("bench.second_order", "trust regions against CG / L-BFGS and pymanopt's TrustRegions: "
+                                           "Brockett and the CMM final stage"),
+    "penalty": ("bench.bench_penalty", "the penalty baseline (jaxopt L-BFGS + projection) against the manifold "
+                                       "solvers"),
+    "mesh": ("bench.bench_mesh", "mesh layer: load, Laplacian assembly, eigenbasis, W @ X formulations"),
+    "bases": ("bench.bench_bases", "GLMH bases against eigsh; functional maps and ICP"),
+    "batch": ("bench.bench_batch", "batched CMM solves: jax.vmap against a Python loop"),
+    "precision": ("bench.bench_precision", "float32 against float64: accuracy and speed of the CMM solvers"),
+    "autodiff": ("bench.bench_autodiff", "implicit derivatives through a CMM solve: backward pass against the "
+                                         "forward solve"),
+    "reliability": ("bench.reliability", "the stiefel command under bad input, faults and load "
+                                         "(writes docs/RELIABILITY.md)"),
+    "thesis": ("bench.thesis.report", "the thesis reproduced claim by claim (writes docs/THESIS.md; --quick)"),
 }
-
-
-def available(name: str) -> bool:
-    """Whether the benchmark's module exists in this checkout (without importing it)."""
-    try:
-        return importlib.util.find_spec(BENCHMARKS[name][0]) is not None
-    except ModuleNotFoundError:
-        return False
 
 
 def listing() -> str:
     width = max(map(len, BENCHMARKS))
-    lines = []
-    for name, (module, text) in BENCHMARKS.items():
-        flag = "" if available(name) else "  [not in this checkout]"
-        lines.append(f"{name:<{width}}  {text}  ({module}){flag}")
-    return "\n".join(lines)
+    return "\n".join(f"{name:<{width}}  {text}" for name, (_, text) in BENCHMARKS.items())
 
 
-USAGE = "usage: python -m bench {--list | NAME [args ...]}   (python -m bench NAME --help for NAME's options)"
+USAGE = "usage: python -m bench NAME [args ...]   (python -m bench NAME --help: NAME's options)"
+FOOTER = ("results: docs/benchmarks/NAME.md (the page) and NAME.json (raw rows); docs/benchmarks/README.md "
+          "is the index")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    if not argv or argv[0] in ("-h", "--help"):
-        print(USAGE + "\n\nbenchmarks:\n" + listing())
+    if not argv or argv[0] in ("-h", "--help", "--list"):
+        print(f"{USAGE}\n\nbenchmarks:\n{listing()}\n\n{FOOTER}")
         return 0 if argv else 2
-    if argv[0] == "--list":
-        print(listing())
-        return 0
     name, rest = argv[0], argv[1:]
     if name not in BENCHMARKS:
-        print(f"unknown benchmark {name!r}; choose one of {', '.join(BENCHMARKS)} (python -m bench --list)",
+        print(f"unknown benchmark {name!r}; choose one of {', '.join(BENCHMARKS)} (python -m bench --help)",
               file=sys.stderr)
         return 2
-    module_name = BENCHMARKS[name][0]
-    if not available(name):
-        print(f"benchmark {name!r} needs module {module_name}, which is not in this checkout "
-              f"(bench/{module_name.split('.')[-1]}.py); update the checkout or run another benchmark "
-              "(python -m bench --list)", file=sys.stderr)
+    from bench.meshes import MeshNotFound  # noqa: PLC0415
+
+    try:
+        out = importlib.import_module(BENCHMARKS[name][0]).main(rest)
+    except MeshNotFound as e:  # raised before anything is measured or written
+        print(f"python -m bench {name}: {e.args[0] if e.args else e}", file=sys.stderr)
         return 2
-    module = importlib.import_module(module_name)
-    out = module.main(rest)
     return out if isinstance(out, int) else 0
 
 

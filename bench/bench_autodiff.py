@@ -1,4 +1,4 @@
-"""Derivatives through manifold solves: backward-pass cost against the forward solve (issue 16).
+"""Derivatives through manifold solves: backward-pass cost against the forward solve.
 
 ``python -m bench autodiff [--subdivisions 5] [--k 10] [--repeats 3]``: on the built-in demo
 surface (icosphere, ``--subdivisions 5``: n = 10 242) the smoothed CMM solve of
@@ -12,7 +12,7 @@ each as the median of ``--repeats`` warm calls, compile time apart:
 * XLA's temporary-memory estimate (``compiled.memory_analysis()``) of both programs;
 * unrolled reverse mode (``optx.RecursiveCheckpointAdjoint``), where it runs at all.
 
-Writes ``bench/results_autodiff.json``; ``bench/RESULTS_autodiff.md`` quotes it.
+Writes ``docs/benchmarks/autodiff.json``; ``docs/benchmarks/autodiff.md`` quotes it.
 """
 
 from __future__ import annotations
@@ -36,13 +36,12 @@ import optimistix as optx  # noqa: E402
 
 import mesh  # noqa: E402
 import stiefel  # noqa: E402
-from bench.environment import run_meta  # noqa: E402
+from bench.environment import results_path, run_meta, write_atomic  # noqa: E402
 from stiefel_cmm.cli.demo_mesh import demo_mesh  # noqa: E402
 from objectives.cmm.modes import first_eigenpairs  # noqa: E402
 from objectives.cmm.differentiable import cmm_solve  # noqa: E402
 from objectives.energy.energies import CMMEnergy  # noqa: E402
 
-HERE = Path(__file__).resolve().parent
 
 
 def _timed(fn, *args, repeats):
@@ -71,7 +70,7 @@ def main(argv=None) -> int:
     ap.add_argument("--subdivisions", type=int, default=5)
     ap.add_argument("--k", type=int, default=10)
     ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--out", type=Path, default=HERE / "results_autodiff.json")
+    ap.add_argument("--out", type=Path, default=None, help="default: docs/benchmarks/autodiff.json")
     args = ap.parse_args(argv)
 
     V, F = demo_mesh(args.subdivisions)
@@ -122,7 +121,7 @@ def main(argv=None) -> int:
         unrolled_note = f"does not run: {type(exc).__name__}: {str(exc).splitlines()[0][:160]}"
 
     out = {
-        "meta": run_meta("bench.bench_autodiff", argv, mesh=f"demo icosphere, subdivisions={args.subdivisions}",
+        "meta": run_meta("bench autodiff", argv, mesh=f"demo icosphere, subdivisions={args.subdivisions}",
                          n=n, k=k, mu=mu0, smoothing="f6", eps=0.5, method="lbfgs", gtol=1e-9),
         "eager_solve_s": start_s, "last_stage_iterations": iters,
         "forward": fwd, "forward_and_backward": both, "backward": bwd, "backward_s": backward,
@@ -131,7 +130,7 @@ def main(argv=None) -> int:
                        "X_bytes": n * k * 8},
         "recursive_checkpoint_adjoint": unrolled_note,
     }
-    args.out.write_text(json.dumps(out, indent=2, default=str) + "\n")
+    write_atomic(args.out or results_path("autodiff", ".json"), json.dumps(out, indent=2, default=str) + "\n")
     print(json.dumps(out, indent=2, default=str))
     return 0
 

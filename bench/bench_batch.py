@@ -1,4 +1,4 @@
-"""Batching (issue 7): ``jax.vmap`` over μ values / random starts vs a Python loop of the same solver.
+"""Batching: ``jax.vmap`` over μ values / random starts vs a Python loop of the same solver.
 
 On one mesh (cotangent W, lumped A, unit area), k modes, uniform ℓ1 weights, f6 with
 ε = δ = 1e-3, ``objectives.cmm.batch.cmm_batch`` solves a batch of B problems:
@@ -16,8 +16,10 @@ solver's own tests (``objectives.cmm.batch.default_options``, ``--iters`` the ca
 loop runs as long as its slowest member. Compile time is reported apart; run times are the best
 of ``--repeats`` runs (a first call pays one-time costs).
 
-    python -m bench.bench_batch                               # starfish, torus; B = 8, 60 iterations
-    python -m bench.bench_batch --meshes fandisk.off --until converged --iters 2000
+    python -m bench batch                               # starfish, torus; B = 8, 60 iterations
+    python -m bench batch --meshes fandisk.off --until converged --iters 2000
+
+Writes ``docs/benchmarks/batch.json`` and a markdown table on stdout (``docs/benchmarks/batch.md`` quotes it).
 """
 
 from __future__ import annotations
@@ -35,8 +37,8 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import mesh  # noqa: E402
-from bench.meshes import load_mesh  # noqa: E402
-from bench.environment import run_meta  # noqa: E402
+from bench.environment import results_path, run_meta, write_json  # noqa: E402
+from bench.meshes import load_mesh, require  # noqa: E402
 from objectives.cmm.batch import cmm_batch, cmm_problem, default_options  # noqa: E402
 
 CONFIGS = {  # --preconditioners name: (table label, cmm_batch preconditioner); "shifted" is CHOLMOD as an XLA
@@ -123,7 +125,7 @@ def run_mesh(name, args):
 
 
 def markdown(meta, results):
-    out = [f"machine: {meta['machine']}; date {meta['date']}; jax {meta['jax']}, scipy {meta['scipy']}, numpy "
+    out = [f"machine: {meta['machine']}; date {meta['date']}; commit {meta.get('commit', 'unknown')}; jax {meta['jax']}, scipy {meta['scipy']}, numpy "
            f"{meta['numpy']}; k = {meta['k']}, B = {meta['batch']}, "
            + (f"{meta['iters']} CG iterations per member (fixed)" if meta.get('until', 'fixed') == 'fixed' else
               f"each member to convergence (at most {meta['iters']} iterations)") + f", best of {meta['repeats']} runs, μ ∈ [{meta['mu_lo']}, "
@@ -175,15 +177,15 @@ def main(argv=None):
     p.add_argument("--until", choices=["fixed", "converged"], default="fixed",
                    help="fixed: --iters iterations per member (equal work); converged: the solver's own stopping tests")
     p.add_argument("--kinds", nargs="+", default=["mu", "starts"], choices=["mu", "starts"])
-    p.add_argument("--out", default=str(Path(__file__).with_name("results_batch.json")))
+    p.add_argument("--out", type=Path, default=None, help="default: docs/benchmarks/batch.json")
     args = p.parse_args(argv)
+    require(args.meshes)
     results = [run_mesh(name, args) for name in args.meshes]
-    meta = run_meta("bench.bench_batch", argv, batch=args.batch, k=args.k,
+    meta = run_meta("bench batch", argv, batch=args.batch, k=args.k,
                    iters=args.iters, until=args.until, repeats=args.repeats, mu_lo=args.mu_lo, mu_hi=args.mu_hi)
-    Path(args.out).write_text(json.dumps({"meta": meta, "results": results}, indent=1))
-    md = markdown(meta, results)
-    print(md)
-    return meta, results, md
+    write_json(args.out or results_path("batch", ".json"), {"meta": meta, "results": results})
+    print(markdown(meta, results))
+    return 0
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""CMM benchmark (issue 4): the manifold solver against the ADMM baseline, side by side.
+"""CMM benchmark: the manifold solver against the ADMM baseline, side by side.
 
 For each mesh (cotangent W, lumped A, unit area), k = 10, μ = 0.01·n, uniform ℓ1 weighting,
 all methods started from the first k eigenfunctions:
@@ -16,11 +16,13 @@ all methods started from the first k eigenfunctions:
 * the thesis's sequential algorithm (optional, ``--sequential``) for reference;
 * ADMM from random starts (``--random-starts S``: seeds 0 … S−1, same ρ rule), the thesis's
   own initialisation (§7.3.1), with the block solver's time to reach each run's best;
-* the issue's reference ADMM times (``REFERENCE``, not side by side): the block solver's time
-  to reach that reference's own best value.
+* the reference ADMM times the performance goal was set against (``REFERENCE``, quoted, not side by side): the
+  block solver's time to reach that reference's own best value.
 
-    python -m bench.bench_cmm                          # bunny, fandisk, camelhead, armadillo
-    python -m bench.bench_cmm --meshes fandisk.off --admm-time 60
+    python -m bench cmm                          # example:starfish, example:torus, example:patch
+    python -m bench cmm --meshes fandisk.off camelhead.off armadillo_25479.obj --admm-time 60
+
+Writes ``docs/benchmarks/cmm.json`` and a markdown table on stdout (``docs/benchmarks/cmm.md`` quotes it).
 
 Times exclude JIT compilation (reported apart) and the shared setup (eigenbasis).
 """
@@ -36,7 +38,7 @@ from pathlib import Path
 
 # One BLAS thread, as in the other benchmarks (bench/bench_mesh.py): on this 2-core machine threaded
 # OpenBLAS's idle threads spin against the solvers (ADMM on camelhead 8.7 → 6.6 ms per iteration
-# with one thread, bench/RESULTS.md); an explicit setting in the environment wins.
+# with one thread, docs/benchmarks/cmm.md); an explicit setting in the environment wins.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import jax  # noqa: E402
@@ -47,12 +49,13 @@ import numpy as np  # noqa: E402
 import scipy  # noqa: E402
 
 import mesh  # noqa: E402
-from bench.meshes import load_mesh  # noqa: E402
+from bench.environment import git_commit, results_path, write_json  # noqa: E402
+from bench.meshes import load_mesh, require  # noqa: E402
 from objectives.cmm.modes import compressed_modes, first_eigenpairs  # noqa: E402
 from objectives.cmm.solvers import ADMMCMM, BlockCMM, SequentialCMM  # noqa: E402
 from stiefel.linalg.sparse_factor import default_backend  # noqa: E402
 
-REFERENCE = {  # issue 4: ADMM reference implementation (CHOLMOD), 2-core CPU
+REFERENCE = {  # the ADMM reference implementation the goal was set against (CHOLMOD), 2-core CPU
     "fandisk.off": (953.12, 29.0), "camelhead.off": (1299.2, 4.0), "bunny.off": (689.06, 0.7),
 }
 
@@ -138,7 +141,7 @@ def run_mesh(name, args):
 
 
 def markdown(meta, rows):
-    out = [f"machine: {meta['machine']}; date {meta['date']}; jax {meta['jax']}, scipy {meta['scipy']}; "
+    out = [f"machine: {meta['machine']}; date {meta['date']}; commit {meta.get('commit', 'unknown')}; jax {meta['jax']}, scipy {meta['scipy']}; "
            f"k = {meta['k']}, μ = {meta['mu_factor']}·n, uniform weighting, eigenbasis start; "
            f"ADMM ρ₀ = {meta['rho_factor']}·λ_k (increase-only adaptation), budget {meta['admm_time']} s; "
            f"sparse factorisation: {meta.get('factor_backend', 'superlu')}; "
@@ -173,7 +176,7 @@ def _best_block(blocks, key, idx=None):
 
 
 def _markdown_other_baselines(rows, fmt):
-    """Tables: ADMM from random starts (side by side) and the issue's reference times (not)."""
+    """Tables: ADMM from random starts (side by side) and the quoted reference times (not)."""
     out = []
     if any(r.get("admm_random") for r in rows):
         out += ["ADMM from random starts (thesis §7.3.1; same ρ rule), side by side with the block solver above:", "",
@@ -189,7 +192,7 @@ def _markdown_other_baselines(rows, fmt):
         out.append("")
     ref_rows = [r for r in rows if r["mesh"] in REFERENCE]
     if ref_rows:
-        out += ["The issue's reference ADMM (its own best value and time, quoted, not measured in this run):", "",
+        out += ["The reference ADMM (its own best value and time, quoted, not measured in this run):", "",
                 "| mesh | reference best | reference time (s) | fastest block variant to that value | block (s) | ratio |",
                 "|---|---|---|---|---|---|"]
         for r in ref_rows:
@@ -216,16 +219,17 @@ def main(argv=None):
     p.add_argument("--sequential", action="store_true")
     p.add_argument("--random-starts", type=int, default=0, help="also run ADMM from this many random starts")
     p.add_argument("--seq-iters", type=int, default=300)
-    p.add_argument("--out", default=str(Path(__file__).with_name("results_cmm.json")))
+    p.add_argument("--out", type=Path, default=None, help="default: docs/benchmarks/cmm.json")
     args = p.parse_args(argv)
+    require(args.meshes)
     rows = [run_mesh(name, args) for name in args.meshes]
-    meta = {"date": time.strftime("%Y-%m-%d"), "machine": f"{platform.machine()}, {os.cpu_count()} cores",
+    meta = {"date": time.strftime("%Y-%m-%d"), "commit": git_commit(), "machine": f"{platform.machine()}, {os.cpu_count()} cores",
             "jax": jax.__version__, "scipy": scipy.__version__, "numpy": np.__version__, "k": args.k,
             "factor_backend": default_backend(), "mu_factor": args.mu_factor, "rho_factor": args.rho_factor, "admm_time": args.admm_time,
             "random_starts": args.random_starts, "continuation": args.continuation,
             "openblas_threads": os.environ.get("OPENBLAS_NUM_THREADS"),
-            "command": "python -m bench.bench_cmm " + " ".join(argv if argv is not None else __import__("sys").argv[1:])}
-    Path(args.out).write_text(json.dumps({"meta": meta, "rows": rows}, indent=1))
+            "command": "python -m bench cmm " + " ".join(argv if argv is not None else __import__("sys").argv[1:])}
+    write_json(args.out or results_path("cmm", ".json"), {"meta": meta, "rows": rows})
     print(markdown(meta, rows))
 
 

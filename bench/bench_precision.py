@@ -1,4 +1,4 @@
-"""float32 vs float64 (issue 7): accuracy and speed of the CMM solvers in single precision.
+"""float32 vs float64: accuracy and speed of the CMM solvers in single precision.
 
 For each mesh (cotangent W, lumped A, unit area), k modes, μ = ``mu_factor``·n, uniform ℓ1
 weights, Huber-type smoothing f6 with ε = δ = 1e-3, eigenbasis start, the same solver runs
@@ -15,8 +15,11 @@ Reported per run: the true (non-smooth) objective of the returned iterate evalua
 its relative difference to the float64 run, ``max|XᵀAX − I|`` of the raw iterate (in float64
 arithmetic), status, iterations, run time and compile time (apart).
 
-    python -m bench.bench_precision                          # bunny.off, fandisk.off
-    python -m bench.bench_precision --meshes hand_868.obj --max-iters 300
+    python -m bench precision                          # example:bumpy, example:torus
+    python -m bench precision --meshes bunny.off fandisk.off   # the committed results
+
+Writes ``docs/benchmarks/precision.json`` and a markdown table on stdout (``docs/benchmarks/precision.md``
+quotes it).
 """
 
 from __future__ import annotations
@@ -33,8 +36,8 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import mesh  # noqa: E402
-from bench.meshes import load_mesh  # noqa: E402
-from bench.environment import run_meta  # noqa: E402
+from bench.environment import results_path, run_meta, write_json  # noqa: E402
+from bench.meshes import load_mesh, require  # noqa: E402
 import stiefel  # noqa: E402
 from objectives.admm.splitting import l1_weights_np  # noqa: E402
 from objectives.cmm.batch import cmm_batch, cmm_problem, default_options  # noqa: E402
@@ -110,7 +113,7 @@ def run_mesh(name, args):
 
 
 def markdown(meta, results):
-    out = [f"machine: {meta['machine']}; date {meta['date']}; jax {meta['jax']}, scipy {meta['scipy']}, numpy "
+    out = [f"machine: {meta['machine']}; date {meta['date']}; commit {meta.get('commit', 'unknown')}; jax {meta['jax']}, scipy {meta['scipy']}, numpy "
            f"{meta['numpy']}; k = {meta['k']}, μ = {meta['mu_factor']}·n, uniform weighting, f6 (ε = δ = 1e-3), "
            f"eigenbasis start, gtol {meta['gtol']}, ftol {meta['ftol']}, block max_iters {meta['max_iters']}; "
            f"command `{meta['command']}`", ""]
@@ -140,15 +143,15 @@ def main(argv=None):
     p.add_argument("--sequential", action=argparse.BooleanOptionalAction, default=True)
     p.add_argument("--seq-iters", type=int, default=150)
     p.add_argument("--admm-time", type=float, default=20.0)
-    p.add_argument("--out", default=str(Path(__file__).with_name("results_precision.json")))
+    p.add_argument("--out", type=Path, default=None, help="default: docs/benchmarks/precision.json")
     args = p.parse_args(argv)
+    require(args.meshes)
     results = [run_mesh(name, args) for name in args.meshes]
-    meta = run_meta("bench.bench_precision", argv, k=args.k,
+    meta = run_meta("bench precision", argv, k=args.k,
                    mu_factor=args.mu_factor, gtol=args.gtol, ftol=args.ftol, max_iters=args.max_iters)
-    Path(args.out).write_text(json.dumps({"meta": meta, "results": results}, indent=1))
-    md = markdown(meta, results)
-    print(md)
-    return meta, results, md
+    write_json(args.out or results_path("precision", ".json"), {"meta": meta, "results": results})
+    print(markdown(meta, results))
+    return 0
 
 
 if __name__ == "__main__":

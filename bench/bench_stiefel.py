@@ -1,15 +1,16 @@
-"""Benchmark of the manifold layer (issue 2): μ = 0 on grid Laplacians, k = 10.
+"""Benchmark of the manifold layer: μ = 0 on grid Laplacians, k = 10.
 
 For each grid size, each solver × retraction × direction × preconditioning: iterations and
 seconds (compile time apart) to reach a Riemannian gradient norm of ``gtol`` (1e-8), the
 eigenvalue error against ``scipy.sparse.linalg.eigsh`` and the orthogonality error.
 
-    python -m bench.bench_stiefel                    # n = 1e4 and 1e5 (about 10 minutes)
-    python -m bench.bench_stiefel --sizes 100 --quick
+    python -m bench stiefel                    # n = 1e4 and 1e5 (about 10 minutes)
+    python -m bench stiefel --sizes 10 --quick
 
 ``W`` is the graph Laplacian of an m×m grid; ``M`` a random positive diagonal in [0.5, 2];
 the preconditioner is ``(W + σM)⁻¹`` with σ = λ₁/2 (one sparse LU, like an ADMM E-step).
-Results go to ``bench/results_stiefel.json`` and a markdown table on stdout.
+Results go to ``docs/benchmarks/stiefel.json`` and a markdown table on stdout (``docs/benchmarks/stiefel.md``
+quotes it).
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ import scipy.sparse as sp  # noqa: E402
 import scipy.sparse.linalg as sla  # noqa: E402
 
 import stiefel  # noqa: E402
+from bench.environment import git_commit, results_path, write_json  # noqa: E402
 from stiefel_cmm.cli.grid_demo import grid_laplacian  # noqa: E402
 
 
@@ -72,7 +74,7 @@ def main(argv=None):
     p.add_argument("-k", type=int, default=10)
     p.add_argument("--gtol", type=float, default=1e-8)
     p.add_argument("--quick", action="store_true", help="preconditioned runs only")
-    p.add_argument("--out", default=str(Path(__file__).with_name("results_stiefel.json")))
+    p.add_argument("--out", type=Path, default=None, help="default: docs/benchmarks/stiefel.json")
     args = p.parse_args(argv)
 
     cases = []
@@ -106,17 +108,17 @@ def main(argv=None):
             print(json.dumps(row), flush=True)
 
     meta = {
-        "date": time.strftime("%Y-%m-%d"), "machine": f"{platform.processor() or platform.machine()}, "
+        "date": time.strftime("%Y-%m-%d"), "commit": git_commit(), "machine": f"{platform.processor() or platform.machine()}, "
         f"{__import__('os').cpu_count()} cores", "python": platform.python_version(), "jax": jax.__version__,
         "numpy": np.__version__, "scipy": scipy.__version__, "k": args.k, "gtol": args.gtol,
-        "command": "python -m bench.bench_stiefel " + " ".join(argv or []),
+        "command": "python -m bench stiefel " + " ".join(argv or []),
     }
-    Path(args.out).write_text(json.dumps({"meta": meta, "rows": rows}, indent=1))
+    write_json(args.out or results_path("stiefel", ".json"), {"meta": meta, "rows": rows})
     print(markdown(meta, rows))
 
 
 def markdown(meta, rows) -> str:
-    lines = [f"machine: {meta['machine']}; date {meta['date']}; jax {meta['jax']}, scipy {meta['scipy']}; "
+    lines = [f"machine: {meta['machine']}; date {meta['date']}; commit {meta.get('commit', 'unknown')}; jax {meta['jax']}, scipy {meta['scipy']}; "
              f"k = {meta['k']}, gtol = {meta['gtol']:g}; command `{meta['command'].strip()}`", "",
              "| n | solver | variant | precond. | iterations (max per column) | status | seconds | compile s "
              "| eigenvalue error | orthogonality |", "|---|---|---|---|---|---|---|---|---|---|"]

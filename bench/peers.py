@@ -1,4 +1,4 @@
-"""Per-iteration cost against a numpy peer (issue 18, item 5): pymanopt's Riemannian CG beside the project's.
+"""Per-iteration cost against a numpy peer: pymanopt's Riemannian CG beside the project's.
 
     python -m bench peers                                 # Brockett n = 10³, 10⁴, 10⁵ and CMM on example:bumpy
     python -m bench peers --sizes 1000 10000 --meshes example:bumpy hand_868.obj --iterations 200
@@ -15,7 +15,7 @@ count at which the history reaches it × the time per iteration).
 
 pymanopt is a bench-only dependency (``pip install -e ".[peers]"``), never imported by the library; it runs
 in a subprocess (``--pymanopt PYTHON``, default: this interpreter when it has pymanopt). Writes
-``bench/RESULTS_peers.md`` and ``bench/results_peers.json`` (atomically).
+``docs/benchmarks/peers.md`` and ``docs/benchmarks/peers.json`` (atomically; notes below ``<!-- notes -->`` kept).
 """
 
 from __future__ import annotations
@@ -39,10 +39,10 @@ import numpy as np  # noqa: E402
 import optimistix as optx  # noqa: E402
 
 import stiefel  # noqa: E402
-from bench.environment import header_lines, run_meta, write_results  # noqa: E402
+from bench.environment import header_lines, results_path, run_meta, write_results  # noqa: E402
+from bench.meshes import require  # noqa: E402
 from bench.second_order import brockett_problem, cmm_problem, pymanopt_subprocess  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
 RETRACTIONS = ("cayley", "cholesky", "polar")
 DEFAULT_RETRACTION = stiefel.GeneralizedStiefel(np.ones(2), 1).retraction
 
@@ -162,11 +162,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--iterations", type=int, default=200)
     p.add_argument("--pymanopt", default=sys.executable if has_pymanopt() else None,
                    help="a Python with pymanopt 2.2.1 (default: this one if it has pymanopt; pip install -e '.[peers]')")
-    p.add_argument("--out-md", type=Path, default=ROOT / "bench" / "RESULTS_peers.md")
-    p.add_argument("--out-json", type=Path, default=ROOT / "bench" / "results_peers.json")
+    p.add_argument("--out-md", type=Path, default=None, help="default: docs/benchmarks/peers.md")
+    p.add_argument("--out-json", type=Path, default=None, help="default: docs/benchmarks/peers.json")
     args = p.parse_args(argv)
     if args.iterations < 1:
         p.error("--iterations must be at least 1")
+    require(args.meshes)
     meta = run_meta("bench peers", argv, iterations=args.iterations, pymanopt=bool(args.pymanopt))
     if not args.pymanopt:
         print("pymanopt is not installed (pip install -e '.[peers]'): only the project's rows", file=sys.stderr)
@@ -177,7 +178,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.pymanopt:
             rows.append(run_peer(problem, args.pymanopt, args.iterations))
     compare(rows)
-    write_results(args.out_json, args.out_md, meta, rows, report(rows, meta))
+    write_results(args.out_json or results_path("peers", ".json"), args.out_md or results_path("peers"), meta, rows,
+                  report(rows, meta))
     return 0
 
 

@@ -1,4 +1,4 @@
-"""The fault catalogue of issue 19: bad input, faults and loads tried as a careless or unlucky user would.
+"""The fault catalogue: bad input, faults and loads tried as a careless or unlucky user would.
 
     python -m bench reliability [--out docs/RELIABILITY.md] [--only SUBSTRING]
 
@@ -7,7 +7,8 @@ and is judged by what a user sees: the exit code, whether a traceback appears, w
 error line names the real cause (a regular expression per case), and for the output cases whether
 the directory is consistent afterwards (``summary.json`` lists exactly the run's files, with
 matching SHA-256, no staging leftovers, earlier results intact). The table (input, expected, got,
-verdict) is written to ``docs/RELIABILITY.md`` with machine, date and command.
+verdict) is written to ``docs/RELIABILITY.md`` with machine, date, commit and command, below the page's
+``MARKER`` line (the hand-written part above it is kept).
 
 The disk-full case mounts a 256 KiB tmpfs when the process may (root on Linux); otherwise it
 fails ``os.fsync`` with ``ENOSPC`` in the child instead, and says so in the table.
@@ -37,7 +38,7 @@ FAST = ["-k", "3", "--max-iters", "60", "--no-png", "--quiet"]
 
 @dataclass
 class Case:
-    cls: str          # class of the issue's list
+    cls: str          # class of failure (outputs, mesh, parameters, …)
     input: str        # what was tried
     expected: str     # what a user should see
     run: Callable[[Path], tuple[bool, str]]   # (passed, what happened)
@@ -553,21 +554,24 @@ def main(argv: list[str] | None = None) -> int:
     return 0 if n_ok == len(rows) else 1
 
 
-def _write(path: Path, rows, argv) -> None:
-    from bench.environment import run_meta
+#: the line of docs/RELIABILITY.md below which this script writes; the hand-written part above it is kept
+MARKER = "<!-- Everything below is written by `python -m bench reliability`; edit bench/reliability.py, not this part. -->"
 
-    meta = run_meta("bench.reliability", argv)
+
+def catalogue(rows, meta: dict) -> str:
+    """The generated part of the page: the fault catalogue's table with machine, date, commit and command."""
     esc = lambda s: str(s).replace("|", "\\|")  # noqa: E731
     lines = [
-        "# Reliability: bad input, faults and loads",
+        "## The fault catalogue",
         "",
-        "Issue 19's classes of failure, each tried for real: the `stiefel` command in a child process",
+        "Classes of failure, each tried for real: the `stiefel` command in a child process",
         "(faults injected in that child where a real one cannot be arranged) or one API call. A case",
         "passes when the user sees what the *expected* column says: for errors, the exit code, no",
         "traceback, and one line naming the real cause; for outputs, a consistent directory",
         "(`summary.json` lists exactly the run's files with matching SHA-256, earlier results intact).",
         "",
-        f"* machine: {meta['machine']}; date: {meta['date']}; jax {meta['jax']}, scipy {meta['scipy']}",
+        f"* machine: {meta['machine']}; date: {meta['date']}; commit: {meta.get('commit', 'unknown')}; "
+        f"jax {meta['jax']}, scipy {meta['scipy']}",
         "* command: `python -m bench reliability` (writes this file; `--only TEXT` runs a subset)",
         f"* result: **{sum(ok for _, ok, _ in rows)} of {len(rows)}** cases as expected",
         "",
@@ -578,9 +582,22 @@ def _write(path: Path, rows, argv) -> None:
         lines.append(f"| {i} | {c.cls} | {esc(c.input)} | {esc(c.expected)} | {esc(got)} | {'✓' if ok else '✗'} |")
     lines += ["", "The fast versions of these checks run in the default test suite (`tests/test_cli_outputs.py`,",
               "`tests/test_mesh_loading_faults.py`, `tests/test_parameters.py`, `tests/test_render.py`); rendering",
-              "memory is measured in `bench/RESULTS_render_memory.md`.", ""]
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(lines), encoding="utf-8")
+              "memory is measured in [benchmarks/render-memory.md](benchmarks/render-memory.md).", ""]
+    return "\n".join(lines)
+
+
+def page(old: str | None, generated: str) -> str:
+    """The whole page: the existing page's hand-written part down to ``MARKER`` (a title where there is none),
+    then the generated catalogue."""
+    head = (old[:old.index(MARKER)] if old and MARKER in old else "# Reliability: bad input, faults and loads\n\n")
+    return head + MARKER + "\n\n" + generated
+
+
+def _write(path: Path, rows, argv) -> None:
+    from bench.environment import run_meta, write_atomic
+
+    old = path.read_text(encoding="utf-8") if path.is_file() else None
+    write_atomic(path, page(old, catalogue(rows, run_meta("bench reliability", argv))))
     print(f"wrote {path}")
 
 

@@ -1,8 +1,8 @@
 """Second order against first order: Riemannian trust regions (exact Hessian, with and without the shifted
 preconditioner) against CG and L-BFGS, and pymanopt's TrustRegions on the same problems.
 
-    python -m bench second_order                         # quick: Brockett n = 10³; example:bumpy
-    python -m bench second_order --brockett 1000 10000 100000 \\
+    python -m bench second-order                         # quick: Brockett n = 10³; example:bumpy
+    python -m bench second-order --brockett 1000 10000 100000 \\
         --meshes fandisk.off camelhead.off armadillo_25479.obj --pymanopt /path/to/python-with-pymanopt
 
 Problems:
@@ -21,13 +21,14 @@ Stiefel manifold) solves the isometric problem on ``St(n, k)``: ``Y = M^{1/2}X``
 ``W̃ = M^{-1/2}WM^{-1/2}``, with numpy gradients and Hessians — its gradient norm is the same number as ours.
 Above n = 2·10⁴ the Brockett problems run only the preconditioned solvers (unpreconditioned trust regions
 had not finished after 8 minutes at n = 10⁵: the Hessian's condition number grows like n).
-Writes ``bench/RESULTS_second_order.md``, ``bench/results_second_order.json`` and
-``bench/second_order_convergence.png`` (gradient norm per iteration: local quadratic convergence).
+Writes ``docs/benchmarks/second-order.md`` (notes below ``<!-- notes -->`` kept), ``second-order.json`` and
+``second-order.png`` beside it (gradient norm per iteration: local quadratic convergence).
 """
 
 from __future__ import annotations
 
 import argparse
+import io
 import json
 import os
 import subprocess
@@ -50,9 +51,9 @@ import scipy.sparse as sp  # noqa: E402
 import scipy.sparse.linalg as spla  # noqa: E402
 
 import stiefel  # noqa: E402
-from bench.environment import header_lines, run_meta, write_atomic  # noqa: E402
+from bench.environment import header_lines, results_path, run_meta, write_atomic, write_json, write_page  # noqa: E402
+from bench.meshes import require  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
 COUNT = [0]
 UNPRECONDITIONED_MAX_N = 20000
 
@@ -313,12 +314,13 @@ def plot(rows: list[dict], path: Path) -> None:
         ax.set_ylabel("‖grad F‖ (M-metric)")
         ax.legend(fontsize=7)
     fig.tight_layout()
-    tmp = path.with_suffix(".tmp.png")
-    fig.savefig(tmp, dpi=110)
-    os.replace(tmp, path)
+    buf = io.BytesIO()
+    fig.savefig(buf, dpi=110, format="png")
+    plt.close(fig)
+    write_atomic(path, buf.getvalue())
 
 
-def report(rows: list[dict], meta: dict) -> str:
+def report(rows: list[dict], meta: dict, figure: str = "second-order.png") -> str:
     lines = ["# Second order: trust regions against CG / L-BFGS and pymanopt", "", *header_lines(meta),
              f"* target: Riemannian gradient norm ≤ {meta['gtol']:g} (Brockett) / {meta['gtol_cmm']:g} (CMM final "
              f"stage), M-metric; at most {meta['max_steps']} iterations; pymanopt limited to {meta['max_time']:g} s",
@@ -343,7 +345,7 @@ def report(rows: list[dict], meta: dict) -> str:
              "smoothing's kink (curvature μw_i s'' > σa_i) inverted by their own curvature, the free ones by P",
              *([f"* problems not rerun by this command: from {meta['earlier']['date']}, command "
                 f"`{meta['earlier']['command']}`"] if meta.get("earlier") else []), "",
-             "![gradient norm per iteration](second_order_convergence.png)", ""]
+             f"![gradient norm per iteration]({figure})", ""]
     for name in dict.fromkeys(r["problem"] for r in rows):
         group = [r for r in rows if r["problem"] == name]
         lines += [f"## {name} (n = {group[0].get('n')}, k = {group[0].get('k')})", "",
@@ -380,7 +382,7 @@ def report(rows: list[dict], meta: dict) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m bench second_order", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog="python -m bench second-order", description=__doc__.split("\n\n")[0])
     p.add_argument("--brockett", type=int, nargs="*", default=[1000], help="sizes n of the Brockett problems")
     p.add_argument("--meshes", nargs="*", default=["example:bumpy"], help="meshes for the CMM final stage")
     p.add_argument("--gtol", type=float, default=1e-10, help="gradient-norm target, Brockett")
@@ -388,21 +390,25 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--max-steps", type=int, default=5000, help="iteration limit of the first-order solvers")
     p.add_argument("--pymanopt", default=None, help="a Python interpreter with pymanopt 2.2.1 (optional)")
     p.add_argument("--max-time", type=float, default=60.0, help="pymanopt's time limit per problem (s)")
-    p.add_argument("--output", type=Path, default=ROOT / "bench" / "RESULTS_second_order.md")
+    p.add_argument("--output", type=Path, default=None,
+                   help="the page (default: docs/benchmarks/second-order.md); its .json and .png go beside it")
     p.add_argument("--merge", action="store_true",
-                   help="keep the rows of bench/results_second_order.json for the problems this run does not solve")
+                   help="keep the rows of the existing JSON for the problems this run does not solve")
     p.add_argument("--from-json", type=Path, default=None,
                    help="rewrite the report and the picture from a results JSON of an earlier run (no solving)")
     args = p.parse_args(argv)
+    out = args.output or results_path("second-order")
+    saved_path, figure = out.with_suffix(".json"), out.with_suffix(".png")
     if args.from_json is not None:
         saved = json.loads(args.from_json.read_text())
         for r in saved["rows"]:  # runs saved before the error line was shortened
             if "error" in r:
                 r["error"] = [line for line in r["error"].splitlines() if line.strip()][-1][-300:]
-        plot(saved["rows"], args.output.parent / "second_order_convergence.png")
-        write_atomic(args.output, report(saved["rows"], saved["meta"]))
-        print(f"wrote {args.output}")
+        plot(saved["rows"], figure)
+        write_page(out, report(saved["rows"], saved["meta"], figure.name))
+        print(f"wrote {out}")
         return 0
+    require(args.meshes)
     rows = []
     problems = [brockett_problem(n) for n in args.brockett] + [cmm_problem(spec) for spec in args.meshes]
     for problem in problems:
@@ -411,10 +417,8 @@ def main(argv: list[str] | None = None) -> int:
             rows.append(run_one(problem, name, first, second, args.max_steps))
         if args.pymanopt:
             rows.append(run_pymanopt(problem, args.pymanopt, gtol, args.max_time))
-    meta = run_meta("bench.second_order", argv, gtol=args.gtol, gtol_cmm=args.gtol_cmm, max_steps=args.max_steps,
+    meta = run_meta("bench second-order", argv, gtol=args.gtol, gtol_cmm=args.gtol_cmm, max_steps=args.max_steps,
                     max_time=args.max_time)
-    out = args.output
-    saved_path = out.parent / "results_second_order.json"
     if args.merge and saved_path.exists():
         saved = json.loads(saved_path.read_text())
         solved = {r["problem"] for r in rows}
@@ -423,9 +427,9 @@ def main(argv: list[str] | None = None) -> int:
             meta["earlier"] = saved["meta"].get("earlier") or {"date": saved["meta"]["date"],
                                                                "command": saved["meta"]["command"]}
         rows = kept + rows
-    plot(rows, out.parent / "second_order_convergence.png")
-    write_atomic(out.parent / "results_second_order.json", json.dumps({"meta": meta, "rows": rows}, indent=1))
-    write_atomic(out, report(rows, meta))
+    plot(rows, figure)
+    write_json(saved_path, {"meta": meta, "rows": rows})
+    write_page(out, report(rows, meta, figure.name))
     print(f"wrote {out}")
     return 0
 

@@ -1,4 +1,4 @@
-"""Benchmark suite (issues 7 and 18): every CMM solver side by side, in one process, on the same inputs.
+"""Benchmark suite: every CMM solver side by side, in one process, on the same inputs.
 
 Each problem — a mesh (cotangent W, lumped A, unit area; k, μ = ``--mu-factor``·n, uniform ℓ1 weighting, the first
 k eigenfunctions as start) or ManPG's 1-D compressed-modes problem (``--manpg N …``: Chen, Ma, So, Zhang, SIAM J.
@@ -26,9 +26,10 @@ high-water increase (reset through ``/proc/self/clear_refs``; XLA buffers includ
     python -m bench suite --mesh bunny.off fandisk.off --repeats 1 --methods block-default admm
     python -m bench suite --all-shared --manpg 128 512 2048 8192 --repeats 1 --no-memory
 
-A mesh that cannot be loaded (e.g. rejected bad input) is listed with its error. Writes ``bench/results_suite.json``
-and ``bench/RESULTS_suite.md`` (atomically, after every problem; notes below a ``<!-- notes -->`` line of the existing
-file are kept); on a GPU machine the JAX parts run there (see ``bench/GPU.md``).
+A mesh file that does not exist stops the run before anything is measured; a mesh that cannot be loaded (e.g.
+rejected bad input) is listed with its error. Writes ``docs/benchmarks/suite.json`` and ``docs/benchmarks/suite.md``
+when every problem is done (atomically; notes below a ``<!-- notes -->`` line of the existing page are kept); on a
+GPU machine the JAX parts run there (see ``docs/benchmarks/gpu.md``).
 """
 
 from __future__ import annotations
@@ -44,10 +45,6 @@ from pathlib import Path
 # One BLAS thread (see bench/bench_mesh.py); an explicit setting in the environment wins.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
-
 import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)  # benchmark script (an application), not library code
@@ -56,13 +53,11 @@ import numpy as np  # noqa: E402
 import scipy  # noqa: E402
 
 import mesh  # noqa: E402
-from bench.environment import write_atomic  # noqa: E402
-from bench.finish import manpg_problem  # noqa: E402
-from bench.meshes import SHARED, load_mesh  # noqa: E402
-from bench.suite_methods import METHODS, MU0, NEEDS_MESH, Problem, measure  # noqa: E402
+from bench.environment import git_commit, results_path, write_json, write_page  # noqa: E402
+from bench.meshes import SHARED, MeshNotFound, load_mesh, require  # noqa: E402
+from bench.suite_methods import METHODS, MU0, NEEDS_MESH, Problem, manpg_problem, measure  # noqa: E402
 from stiefel.linalg.sparse_factor import default_backend  # noqa: E402
 
-HERE = Path(__file__).resolve().parent
 REL = 1e-3
 MESH_SUFFIXES = (".obj", ".off", ".ply", ".stl")
 
@@ -84,7 +79,7 @@ def _downsample(times, values, max_points=400):
 def shared_meshes() -> list[str]:
     """Every mesh file in ``../shared/meshes`` (the developers' test meshes), smallest file first."""
     if not SHARED.is_dir():
-        raise FileNotFoundError(f"--all-shared: {SHARED} does not exist (it sits beside the repository on the "
+        raise MeshNotFound(f"--all-shared: {SHARED} does not exist (it sits beside the repository on the "
                                 "developers' machines only)")
     files = [p for p in SHARED.iterdir() if p.suffix.lower() in MESH_SUFFIXES]
     return [p.name for p in sorted(files, key=lambda p: p.stat().st_size)]
@@ -150,8 +145,8 @@ def run_problem(pb: Problem, args) -> dict:
     return {"setup": setup, "rows": rows}
 
 
-def run_suite(args, save=None) -> list[dict]:
-    """Every problem in turn; ``save(results so far)`` after each (an interrupted run keeps the finished ones)."""
+def run_suite(args) -> list[dict]:
+    """Every problem in turn (a problem whose input is rejected becomes a row with its error)."""
     out = []
     for label, build in problems(args):
         try:
@@ -161,8 +156,6 @@ def run_suite(args, save=None) -> list[dict]:
             print(json.dumps({"problem": label, "error": out[-1]["error"]}), flush=True)
             continue
         out.append(run_problem(pb, args))
-        if save is not None:
-            save(out)
     return out
 
 
@@ -177,6 +170,7 @@ def metadata(argv) -> dict:
     backend = jax.default_backend()
     return {"date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
             "machine": f"{cpu}, {os.cpu_count()} logical cores, {platform.system()} {platform.release()}",
+            "commit": git_commit(),
             "load_average_at_start": os.getloadavg()[0],
             "versions": {"python": platform.python_version(), "numpy": np.__version__, "scipy": scipy.__version__,
                          "jax": jax.__version__, "jaxlib": jaxlib.__version__, "equinox": equinox.__version__},
@@ -253,8 +247,8 @@ def problem_table(res: dict, memory: bool) -> list[str]:
 
 
 def markdown(meta, results, args) -> str:
-    out = ["# Benchmark suite: CMM solvers side by side (generated by bench/suite.py)", "", "## Recipe", "",
-           f"* date: {meta['date']}",
+    out = ["# Benchmark suite: CMM solvers side by side (generated by `python -m bench suite`)", "", "## Recipe", "",
+           f"* date: {meta['date']}; commit: {meta.get('commit', 'unknown')}",
            f"* machine: {meta['machine']} (load average at start {meta['load_average_at_start']:.1f}; "
            "other jobs shared the cores, seconds are noisy)",
            "* versions: " + ", ".join(f"{k} {v}" for k, v in meta["versions"].items()),
@@ -283,22 +277,10 @@ def markdown(meta, results, args) -> str:
             out += [f"### {res['setup']['problem']}", "", f"Not run: {res['error']}", ""]
         else:
             out += problem_table(res, memory)
-    out += ["Objective-vs-seconds curves of every run are in `results_suite.json` (`problems[i].rows.<method>.curve`;"
+    out += ["Objective-vs-seconds curves of every run are in `suite.json` (`problems[i].rows.<method>.curve`;"
             " the block solvers' times are interpolated linearly over their iterations; the sequential solver, the "
             "penalty and eigsh have only their final point).", ""]
     return "\n".join(out)
-
-
-NOTES = "<!-- notes -->"
-
-
-def with_notes(md: str, path: Path) -> str:
-    """``md`` followed by the hand-written notes below the ``<!-- notes -->`` line of the existing ``path``."""
-    if path.is_file():
-        old = path.read_text()
-        if NOTES in old:
-            return md.rstrip("\n") + "\n\n" + old[old.index(NOTES):]
-    return md
 
 
 def main(argv=None):
@@ -327,11 +309,13 @@ def main(argv=None):
     p.add_argument("--fast-samples", type=int, default=500, help="d, the number of local functions")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--no-memory", action="store_true", help="skip the extra tracemalloc run per method")
-    p.add_argument("--out-json", default=str(HERE / "results_suite.json"))
-    p.add_argument("--out-md", default=str(HERE / "RESULTS_suite.md"))
+    p.add_argument("--out-json", type=Path, default=None, help="default: docs/benchmarks/suite.json")
+    p.add_argument("--out-md", type=Path, default=None, help="default: docs/benchmarks/suite.md")
     p.add_argument("--render", nargs="+", default=None, metavar="JSON",
                    help="only re-render --out-md from these results JSONs (several: also combined into --out-json)")
     args = p.parse_args(argv)
+    args.out_json = args.out_json or results_path("suite", ".json")
+    args.out_md = args.out_md or results_path("suite")
     if args.render:  # re-render the markdown from results JSONs (several: their problems in turn, the first's recipe)
         saved = [json.loads(Path(f).read_text()) for f in args.render]
         meta = dict(saved[0]["meta"])
@@ -340,9 +324,8 @@ def main(argv=None):
         problems_ = [p for s in saved for p in s["problems"]]
         shown = argparse.Namespace(**saved[0]["params"])
         if len(saved) > 1:
-            write_atomic(Path(args.out_json), json.dumps({"meta": meta, "params": saved[0]["params"],
-                                                          "problems": problems_}, default=float))
-        write_atomic(Path(args.out_md), with_notes(markdown(meta, problems_, shown), Path(args.out_md)))
+            write_json(args.out_json, {"meta": meta, "params": saved[0]["params"], "problems": problems_}, indent=None)
+        write_page(args.out_md, markdown(meta, problems_, shown))
         return 0
     if args.repeats < 1:
         p.error("--repeats must be ≥ 1")
@@ -351,19 +334,14 @@ def main(argv=None):
         meshes += [m for m in shared_meshes() if m not in meshes]
     if not meshes and not args.manpg:
         meshes = ["example:starfish"]
+    require(meshes)
     args.mesh = meshes
     meta = metadata(argv)
     params = {k: v for k, v in vars(args).items() if k not in ("out_json", "out_md", "render")}
-
-    def save(results):
-        write_atomic(Path(args.out_json), json.dumps({"meta": meta, "params": params, "problems": results},
-                                                     default=float))
-        md = markdown(meta, results, args)
-        write_atomic(Path(args.out_md), with_notes(md, Path(args.out_md)))
-        return md
-
-    results = run_suite(args, save)
-    md = save(results)
+    results = run_suite(args)
+    md = markdown(meta, results, args)
+    write_json(args.out_json, {"meta": meta, "params": params, "problems": results}, indent=None)
+    write_page(args.out_md, md)
     print(md)
     return 0
 

@@ -1,6 +1,6 @@
-"""The benchmark suite's problems and methods (``python -m bench suite``; issues 7 and 18).
+"""The benchmark suite's problems and methods (``python -m bench suite``).
 
-A ``Problem`` holds what every method shares — ``W``, the mass diagonal ``a``, k, μ, the ℓ1 weighting,
+``manpg_problem`` builds ManPG's 1-D compressed-modes problem. A ``Problem`` holds what every method shares — ``W``, the mass diagonal ``a``, k, μ, the ℓ1 weighting,
 the start, the eigenpairs, the ``(W + σA)⁻¹`` preconditioner (σ = λ_(k−1)) and the smoothed energy
 (Huber f6, δ = 1e-3) — and ``RUNNERS`` maps each method's name to a function ``Problem -> dict`` with
 the method's modes, iterations, status, seconds (compile apart) and objective-vs-seconds curve.
@@ -37,6 +37,17 @@ METHODS = (*BLOCK, "block-default", "block-default-finish", "block-cg-active-set
            "penalty", "eigsh", "block-cg-mu0")
 MU0 = ("eigsh", "block-cg-mu0")
 NEEDS_MESH = ("fast",)  # the fast approximation's local functions are sampled on the surface
+
+
+def manpg_problem(n: int) -> tuple:
+    """ManPG's compressed-modes problem (Chen, Ma, So, Zhang, SIAM J. Optim. 2020, §6.1): ``Ĥ = −½Δ``, the periodic
+    second-difference Laplacian on ``[0, 50]`` with n points, and ``XᵀX = I`` (A = I, so the area-weighted ℓ1 is
+    ``μ‖X‖₁``). Returns ``(W (n, n) csr, a = ones (n,))``."""
+    h = 50.0 / n
+    e = np.ones(n)
+    D = sp.diags([-e[:-1], 2 * e, -e[:-1]], [-1, 0, 1], format="lil")
+    D[0, n - 1] = D[n - 1, 0] = -1.0
+    return sp.csr_matrix(D / (2.0 * h * h)), np.ones(n)
 
 
 class Problem:

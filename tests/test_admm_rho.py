@@ -273,17 +273,3 @@ def test_bad_solver_options_and_variants_raise_named_errors(small, demo):
         with pytest.raises(SolverOptionError, match=match):
             make()
 
-
-@pytest.mark.slow
-def test_bench_admm_rho_writes_its_table(tmp_path):
-    """``python -m bench.admm_rho`` on a generated mesh, 15 iterations (≈ 10 s)."""
-    from bench import admm_rho
-
-    md, js = tmp_path / "r.md", tmp_path / "r.json"
-    argv = ["--meshes", "example:torus", "--iters", "15", "--out-md", str(md), "--out-json", str(js)]
-    assert admm_rho.main(argv) == 0
-    rows = __import__("json").loads(js.read_text())["rows"]
-    assert {(r["solver"], r["variant"], r["rule"]) for r in rows} >= {
-        (s, v, rule) for s in ("admm", "fast") for v in ("exact", "thesis") for rule in ("increase", "both")}
-    assert all(set(r["ms_per_iteration"]) == set(STEPS) for r in rows)
-    assert "| example:torus |" in md.read_text() and "**Summary** (4 pairs" in md.read_text()

@@ -1,6 +1,8 @@
-"""The benchmark entry point ``python -m bench`` and a tiny run of the suite (issue 7)."""
+"""The benchmark runner ``python -m bench``: its listing, where results go, what a missing input or a failed run
+leaves behind (nothing), and tiny runs of the benchmarks. No test needs ``../shared`` or writes into ``docs/``."""
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -9,41 +11,128 @@ import numpy as np
 import pytest
 
 from bench import __main__ as dispatcher
+from bench import environment, meshes
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_list_names_every_benchmark():
-    out = subprocess.run([sys.executable, "-m", "bench", "--list"], cwd=ROOT, capture_output=True, text=True,
+@pytest.fixture
+def results(tmp_path, monkeypatch):
+    """The results directory moved to a temporary one (``docs/benchmarks`` is never written by a test) and the
+    shared meshes hidden, with one committed-looking page and JSON per benchmark that has mesh inputs."""
+    out = tmp_path / "benchmarks"
+    out.mkdir()
+    monkeypatch.setattr(environment, "RESULTS", out)
+    monkeypatch.setattr(meshes, "SHARED", tmp_path / "no_shared_meshes")
+    for name in MESH_OPTIONS:
+        (out / f"{name}.md").write_text(f"# {name}: the committed page\n\n<!-- notes -->\nkept\n")
+        (out / f"{name}.json").write_text('{"meta": {}, "rows": []}\n')
+    return out
+
+
+def snapshot(directory: Path) -> dict:
+    return {p.name: p.read_bytes() for p in sorted(directory.iterdir())}
+
+
+def test_help_lists_every_benchmark_in_one_line_each():
+    out = subprocess.run([sys.executable, "-m", "bench", "--help"], cwd=ROOT, capture_output=True, text=True,
                          timeout=60)
     assert out.returncode == 0, out.stderr
-    names = [line.split()[0] for line in out.stdout.splitlines() if line.strip()]
-    assert names == list(dispatcher.BENCHMARKS)
-    for name in ("suite", "scaling", "stiefel", "mesh", "cmm", "bases"):  # present in this checkout
-        assert dispatcher.available(name)
-        assert "[not in this checkout]" not in next(line for line in out.stdout.splitlines()
-                                                    if line.startswith(name + " "))
+    listed = out.stdout.split("benchmarks:\n", 1)[1].split("\n\n", 1)[0].splitlines()
+    assert [line.split()[0] for line in listed] == list(dispatcher.BENCHMARKS)
+    assert all(len(line.split(None, 1)) == 2 for line in listed)  # a name and what it measures
+    assert "docs/benchmarks/" in out.stdout
+    import importlib.util  # noqa: PLC0415
+
+    for module, _ in dispatcher.BENCHMARKS.values():  # every entry names a module of this checkout
+        assert importlib.util.find_spec(module) is not None, module
+    assert dispatcher.main([]) == 2  # no name: the listing, and a usage error
 
 
-def test_missing_module_and_unknown_name_are_named(monkeypatch, capsys):
-    monkeypatch.setitem(dispatcher.BENCHMARKS, "ghost", ("bench.no_such_benchmark", "not written yet"))
-    assert dispatcher.main(["ghost", "--quick"]) == 2
-    err = capsys.readouterr().err
-    assert "bench.no_such_benchmark" in err and "not in this checkout" in err
-    assert "[not in this checkout]" in dispatcher.listing()
+def test_unknown_name_is_named(capsys):
     assert dispatcher.main(["no-such-name"]) == 2
     assert "unknown benchmark 'no-such-name'" in capsys.readouterr().err
 
 
-def test_bench_meshes_resolve_without_shared(tmp_path, monkeypatch):
-    from bench import meshes
+def test_results_go_to_docs_benchmarks(monkeypatch, tmp_path):
+    assert environment.RESULTS == ROOT / "docs" / "benchmarks"
+    assert environment.results_path("suite", ".json") == ROOT / "docs" / "benchmarks" / "suite.json"
+    monkeypatch.setattr(environment, "RESULTS", tmp_path)
+    assert environment.results_path("scaling-modes") == tmp_path / "scaling-modes.md"  # looked up when called
 
+
+def test_bench_meshes_resolve_without_shared(tmp_path, monkeypatch):
     monkeypatch.setattr(meshes, "SHARED", tmp_path / "nowhere")
     m, label = meshes.load_mesh("example:torus")
     assert label == "example:torus" and m.n_vertices == 1728
     assert meshes.load_mesh("demo")[0].n_vertices == 2562
     with pytest.raises(FileNotFoundError, match="'hand_868.obj' not found .* example:bumpy"):
         meshes.load_mesh("hand_868.obj")
+    meshes.require(["example:bumpy", "demo", __file__])  # generated meshes and files exist
+    with pytest.raises(meshes.MeshNotFound, match="'fandisk.off'"):
+        meshes.require(["example:bumpy", "fandisk.off"])
+
+
+#: benchmark -> its mesh option (a shared mesh name that a fresh clone does not have)
+MESH_OPTIONS = {"suite": "--mesh", "cmm": "--meshes", "batch": "--meshes", "precision": "--meshes",
+                "bases": "--meshes", "peers": "--meshes", "second-order": "--meshes", "scaling": "--base",
+                "scaling-modes": "--base"}
+
+
+@pytest.mark.parametrize("name", list(MESH_OPTIONS))
+def test_a_missing_mesh_exits_non_zero_in_one_line_and_writes_nothing(name, results, capsys):
+    before = snapshot(results)
+    rc = dispatcher.main([name, MESH_OPTIONS[name], "fandisk.off"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2
+    assert len(err.splitlines()) == 1 and err.startswith(f"python -m bench {name}: ") and "'fandisk.off'" in err
+    assert snapshot(results) == before  # the committed page and JSON untouched, nothing added
+
+
+def test_a_failed_suite_run_leaves_the_committed_page(results, monkeypatch):
+    from bench import suite  # noqa: PLC0415
+
+    def boom(args):
+        raise RuntimeError("a solver crashed half-way")
+
+    monkeypatch.setattr(suite, "run_suite", boom)
+    before = snapshot(results)
+    with pytest.raises(RuntimeError, match="half-way"):
+        dispatcher.main(["suite", "--mesh", "example:torus", "--repeats", "1"])
+    assert snapshot(results) == before
+
+
+def test_pages_are_written_atomically_and_keep_their_notes(tmp_path, monkeypatch):
+    page = tmp_path / "x.md"
+    page.write_text("# old table\n\n<!-- notes -->\n## Reading\n\nkept\n")
+    environment.write_page(page, "# new table\n")
+    assert page.read_text() == "# new table\n\n<!-- notes -->\n## Reading\n\nkept\n"
+    environment.write_page(tmp_path / "fresh.md", "# a page\n")
+    assert (tmp_path / "fresh.md").read_text() == "# a page\n"
+
+    def interrupted(src, dst):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(os, "replace", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        environment.write_page(page, "# half a table")
+    assert page.read_text().startswith("# new table") and sorted(p.name for p in tmp_path.iterdir()) == [
+        "fresh.md", "x.md"]  # no temporary file left
+
+
+def test_reliability_keeps_the_hand_written_part_of_its_page():
+    from bench import reliability  # noqa: PLC0415
+
+    class Case:
+        cls, input, expected = "mesh", "a | b", "refused"
+
+    meta = {"machine": "m", "date": "d", "commit": "c", "jax": "j", "scipy": "s"}
+    generated = reliability.catalogue([(Case, True, "exit 1")], meta)
+    old = "# Reliability\n\nhand-written\n\n" + reliability.MARKER + "\n\n## The fault catalogue\n\nold rows\n"
+    new = reliability.page(old, generated)
+    assert new.startswith("# Reliability\n\nhand-written\n\n" + reliability.MARKER) and "old rows" not in new
+    assert "| 1 | mesh | a \\| b | refused | exit 1 | ✓ |" in new and "commit: c" in new
+    assert reliability.page(None, generated).startswith("# Reliability: bad input")
 
 
 def test_tiny_suite_writes_consistent_results(tmp_path):
@@ -105,7 +194,7 @@ def test_tiny_suite_writes_consistent_results(tmp_path):
 
 
 def test_cmm_bench_tables_for_random_starts_and_reference():
-    """The issue-4 tables: speed-up = ADMM's time / the fastest block variant's time to the same value."""
+    """The cmm tables: speed-up = ADMM's time / the fastest block variant's time to the same value."""
     from bench import bench_cmm
 
     blocks = {"shifted:cg": {"time_to_random_start_admm_best": [0.5, None], "time_to_reference_best": 0.4},
@@ -132,22 +221,22 @@ def test_cmm_bench_tables_for_random_starts_and_reference():
 def test_second_order_bench_tiny(tmp_path):
     """``python -m bench second-order`` on a 100-vertex Brockett problem: every solver's row, W products counted,
     the optimum matches eigsh, the convergence picture written beside the results."""
-    out = tmp_path / "RESULTS_second_order.md"
+    out = tmp_path / "second-order.md"
     assert dispatcher.main(["second-order", "--brockett", "100", "--meshes", "--max-steps", "400",
                             "--output", str(out)]) == 0
-    rows = json.loads((tmp_path / "results_second_order.json").read_text())["rows"]
+    rows = json.loads((tmp_path / "second-order.json").read_text())["rows"]
     assert [r["solver"] for r in rows] == ["TR", "TR + P", "CG + P", "L-BFGS + P", "L-BFGS"]
     tr = rows[1]
     assert tr["status"] == "converged" and tr["error_vs_eigsh"] <= 1e-12 and tr["w_products"] > tr["n_hvps"] > 0
-    assert (tmp_path / "second_order_convergence.png").read_bytes()[:4] == b"\x89PNG"
-    assert "| TR + P |" in out.read_text()
+    assert (tmp_path / "second-order.png").read_bytes()[:4] == b"\x89PNG"
+    assert "| TR + P |" in out.read_text() and "![gradient norm per iteration](second-order.png)" in out.read_text()
 
 
 @pytest.mark.slow
 def test_peers_bench_tiny(tmp_path):
     """``python -m bench peers`` on a 100-vertex Brockett problem without pymanopt: a row per retraction with
     the time per iteration, the objective history, the default retraction named in the report."""
-    out, js = tmp_path / "RESULTS_peers.md", tmp_path / "results_peers.json"
+    out, js = tmp_path / "peers.md", tmp_path / "peers.json"
     assert dispatcher.main(["peers", "--sizes", "100", "--meshes", "--iterations", "20", "--pymanopt", "",
                             "--out-md", str(out), "--out-json", str(js)]) == 0
     rows = json.loads(js.read_text())["rows"]
@@ -156,42 +245,6 @@ def test_peers_bench_tiny(tmp_path):
         assert r["iterations"] == 20 and r["ms_per_iteration"] > 0 and len(r["history_value"]) == 21
         assert r["history_value"][-1] < r["history_value"][0]
     assert "ours CG (cholesky)" in out.read_text()
-
-
-def test_manpg_problem_is_the_periodic_schrodinger_operator():
-    """bench.finish.manpg_problem: Ĥ = −½Δ with periodic differences on [0, 50] — eigenvalues (1 − cos 2πj/n)/h²."""
-    from bench.finish import manpg_problem
-
-    n = 64
-    W, a = manpg_problem(n)
-    h = 50.0 / n
-    expected = np.sort((1.0 - np.cos(2.0 * np.pi * np.arange(n) / n)) / h**2)
-    assert np.allclose(np.linalg.eigvalsh(W.toarray()), expected, atol=1e-10)
-    assert np.array_equal(a, np.ones(n)) and (W != W.T).nnz == 0
-
-
-@pytest.mark.slow
-def test_finish_bench_manpg_tiny(tmp_path):
-    """``python -m bench finish --meshes --manpg 32``: four rows per ManPG case; the finished modes have exact
-    zeros, are A-orthonormal and are not above their method's own objective."""
-    out, js = tmp_path / "RESULTS_finish.md", tmp_path / "results_finish.json"
-    assert dispatcher.main(["finish", "--meshes", "--manpg", "32", "--out-md", str(out), "--out-json", str(js)]) == 0
-    rows = json.loads(js.read_text())["rows"]
-    assert len(rows) == 16 and {r["method"] for r in rows} == {"block", "block + finish", "admm", "admm + finish"}
-    for own, fin in zip(rows[::2], rows[1::2]):
-        assert fin["method"] == own["method"] + " + finish" and fin["objective"] <= own["objective"]
-        assert fin["orthogonality"] < 1e-12
-    assert all(r["exact_zeros"] > 0.5 for r in rows if r["method"] == "block + finish")
-    assert "| block + finish |" in out.read_text()
-
-
-def test_tail_times_split_at_the_first_time_within_1e3_of_the_final_value():
-    from bench.tails import tail_times  # noqa: PLC0415
-
-    times = np.array([0.0, 1.0, 2.0, 3.0, 10.0])
-    values = np.array([2000.0, 1010.0, 1000.9, 1000.5, 1000.0])  # 1000.9 is the first within 1e-3 of 1000
-    assert tail_times(times, values) == (2.0, 8.0)
-    assert tail_times(np.array([0.0, 4.0]), np.array([5.0, 5.0])) == (0.0, 4.0)
 
 
 def test_scaling_modes_report_lists_every_level():
@@ -237,49 +290,36 @@ def test_scaling_modes_merge_keeps_other_rows(tmp_path, monkeypatch):
     assert "| bunny.off (4) | 2026-11-26 09:39 UTC | 891650 |" in out_md.read_text()
 
 
-def test_scaling_modes_carry_modes_is_a_orthonormal_and_keeps_constants():
-    """The coarse-to-fine carry of ``--coarse-start``: a constant carries exactly, the result is A-orthonormal."""
-    from bench.scaling_modes import carry_modes  # noqa: PLC0415
+def test_manpg_problem_is_the_periodic_schrodinger_operator():
+    """``manpg_problem``: Ĥ = −½Δ with periodic differences on [0, 50] — eigenvalues (1 − cos 2πj/n)/h²."""
+    from bench.suite_methods import manpg_problem  # noqa: PLC0415
 
-    rng = np.random.default_rng(0)
-    Vc, Vf = rng.random((50, 3)), rng.random((400, 3))
-    a = 0.5 + rng.random(400)
-    modes = np.column_stack([np.ones(50), Vc[:, 0], rng.standard_normal(50)])
-    X = carry_modes(Vc, modes, Vf, a)
-    assert np.max(np.abs(X.T @ (a[:, None] * X) - np.eye(3))) < 1e-12
-    assert np.ptp(X[:, 0]) < 1e-12 and abs(X[0, 0] - 1.0 / np.sqrt(a.sum())) < 1e-12  # the constant column
-    # the first column spans the constants and the second what was carried of x: Gram–Schmidt order is kept
-    assert abs(np.corrcoef(X[:, 1], Vf[:, 0])[0, 1]) > 0.9
+    n = 64
+    W, a = manpg_problem(n)
+    h = 50.0 / n
+    expected = np.sort((1.0 - np.cos(2.0 * np.pi * np.arange(n) / n)) / h**2)
+    assert np.allclose(np.linalg.eigvalsh(W.toarray()), expected, atol=1e-10)
+    assert np.array_equal(a, np.ones(n)) and (W != W.T).nnz == 0
 
 
-def test_scaling_modes_report_lists_coarse_start_runs():
-    from bench.scaling_modes import report  # noqa: PLC0415
+def test_time_to_final_is_the_first_time_within_1e3_of_the_last_value():
+    from bench.scaling_modes import time_to_final  # noqa: PLC0415
 
-    meta = {"date": "d", "machine": "m", "command": "c", "jax": "j", "scipy": "s", "numpy": "n", "base": "bunny.off",
-            "k": 10}
-    row = {"level": 2, "n": 55730, "k": 10, "eigsh_seconds": 1.2, "seconds": 38.2, "compile_seconds": 4.9,
-           "ratio_to_eigsh": 36.9, "t_near": 8.0, "iterations": 308, "status": "converged", "objective": 1389.4,
-           "peak_rss_gib": 1.2,
-           "coarse_start": {"n_coarse": 13934, "coarse_seconds": 13.2, "coarse_iterations": 337,
-                            "coarse_status": "converged", "carry_seconds": 0.1, "seconds": 24.1, "compile_seconds": 0.0,
-                            "iterations": 181, "status": "converged", "objective": 1389.4, "vs_default": 1.1e-8,
-                            "t_near": 1.3, "ratio_to_eigsh": 32.0}}
-    text = report([row, {"level": 3, "error": "not finished within 1800 s"}], meta)
-    assert "| bunny.off (2) | d | 55730 | 13934 | 13.2 (337) | 0.10 | 24.1 | 0.0 | 181 | 1.3 | 32.0 | +1.1e-08 |" in text
-    assert text.count("| bunny.off (3) |") == 1  # the failed level only in the first table
+    times = [0.0, 1.0, 2.0, 3.0, 10.0]
+    values = [2000.0, 1010.0, 1000.9, 1000.5, 1000.0]  # 1000.9 is the first within 1e-3 of 1000
+    assert time_to_final(times, values) == 2.0
+    assert time_to_final([0.0, 4.0], [5.0, 5.0]) == 0.0
 
 
-def test_scaling_modes_passes_coarse_start_to_each_level(tmp_path, monkeypatch):
+def test_scaling_modes_writes_nothing_when_a_level_fails(tmp_path, monkeypatch, capsys):
     from bench import scaling_modes  # noqa: PLC0415
 
-    calls = []
+    class Failed:
+        returncode, stdout, stderr = 1, "", "Traceback ...\nMemoryError: Unable to allocate 80 GiB\n"
 
-    class Done:
-        returncode, stderr = 0, ""
-        stdout = json.dumps({"level": 1, "error": "stub"})
-
-    monkeypatch.setattr(scaling_modes.subprocess, "run", lambda cmd, **k: calls.append(cmd) or Done())
-    out = ["--out-json", str(tmp_path / "r.json"), "--out-md", str(tmp_path / "r.md")]
-    assert scaling_modes.main(["--levels", "1", "2", "--coarse-start", *out]) == 0
-    assert scaling_modes.main(["--levels", "1", *out]) == 0
-    assert ["--coarse-start" in c for c in calls] == [True, True, False]
+    monkeypatch.setattr(scaling_modes.subprocess, "run", lambda *a, **k: Failed())
+    out_json, out_md = tmp_path / "r.json", tmp_path / "r.md"
+    out_md.write_text("the committed page\n")
+    assert scaling_modes.main(["--levels", "1", "2", "--out-json", str(out_json), "--out-md", str(out_md)]) == 1
+    assert "level 1 failed (MemoryError: Unable to allocate 80 GiB); nothing written" in capsys.readouterr().err
+    assert out_md.read_text() == "the committed page\n" and not out_json.exists()

@@ -1,4 +1,4 @@
-"""The thesis reproduced, claim by claim (issue 20): ``python -m bench thesis [--quick]`` → ``docs/THESIS.md``.
+"""The thesis reproduced, claim by claim: ``python -m bench thesis [--quick]`` → ``docs/THESIS.md``.
 
 Each chapter module (``MODULES``) exposes ``claims(ctx: Context) -> list[Claim]``: it measures the claims of
 its chapters on the mesh closest to the thesis's (``Context.mesh``: a shared mesh under ``../shared/meshes``

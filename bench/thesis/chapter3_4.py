@@ -1,4 +1,4 @@
-"""Thesis Chapters 3 and 4, claim by claim (issue 20): the effect of μ on CMMs (Fig. 3.5) and the comparison
+"""Thesis Chapters 3 and 4, claim by claim: the effect of μ on CMMs (Fig. 3.5) and the comparison
 of bases for reconstructing functions (Figs. 4.5–4.19, §4.7).
 
 ``claims(ctx)`` measures on the shared meshes closest to the thesis's (``Context.mesh``; shipped examples

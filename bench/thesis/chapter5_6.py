@@ -1,4 +1,4 @@
-"""Thesis Chapters 5 and 6, claim by claim (issue 20; ``python -m bench thesis --only chapter5_6``).
+"""Thesis Chapters 5 and 6, claim by claim (``python -m bench thesis --only chapter5_6``).
 
 Chapter 5 (``chapter5_6_fmaps``): functional maps per basis type on a mesh and three copies with a known
 correspondence — ICP against the true map (Fig. 5.2), refinement and the transformation errors (Figs.

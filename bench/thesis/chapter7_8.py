@@ -1,4 +1,4 @@
-"""Thesis Chapters 7 and 8, claim by claim (issue 20; ``python -m bench thesis --only chapter7_8``).
+"""Thesis Chapters 7 and 8, claim by claim (``python -m bench thesis --only chapter7_8``).
 
 Chapter 7 (fast approximation): ``chapter7_8_local`` — local functions and the restricted eigenproblem
 (Lemmas 7.1.2–7.1.3, the 7–15 coverage, Figs. 7.1–7.3); ``chapter7_8_restrict`` — Proposition 7.1.4

@@ -9,8 +9,8 @@ exact variants) and every default ρ₀ is multiplied by it (``default_rho``: ``
 
 **Balancing** (Boyd et al. 2011 §3.4.1, thesis §2.4.2): ``RhoRule`` multiplies ρ by ``τ`` or ``1/τ`` when one
 residual exceeds ``η`` times the other and rescales the scaled duals ``U ← U/factor`` so that the unscaled
-multipliers ``y = ρU`` — the state of the method — are unchanged by the step. ``bench/admm_rho.py`` measures
-the rules (``bench/RESULTS_admm_rho.md``).
+multipliers ``y = ρU`` — the state of the method — are unchanged by the step. The rules were measured against
+each other once (``docs/benchmarks/admm-rho.md``).
 
 **Clocks.** ``StepClock`` sums the wall time of each step (``STEPS``) for ``ADMMResult.step_times``.
 """

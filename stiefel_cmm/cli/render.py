@@ -18,8 +18,7 @@ former ``PolyCollection`` drawing showed them). Back faces of closed, consistent
 culled. Text is matplotlib's DejaVu Sans drawn by FreeType through PIL (glyph clusters cached) straight
 into the canvas; there is no ``Figure``, and the default colormap is built here, so a sheet does not
 import matplotlib at all (that import alone costs about twice the sheet). The PNG is written by
-:func:`png_bytes` (PIL, zlib level 1). Costs against the former renderer: ``bench/RESULTS_render.md``
-(``python -m bench render-cost``).
+:func:`png_bytes` (PIL, zlib level 1). Costs against the former renderer: ``docs/benchmarks/render-cost.md``.
 """
 
 from __future__ import annotations
@@ -199,7 +198,7 @@ def _check_method(method: str) -> bool:
 def png_bytes(rgb: np.ndarray, dpi: float = 72.0, compress_level: int = 1) -> bytes:
     """An 8-bit RGB PNG of ``rgb (H, W, 3)`` uint8 by PIL's encoder at zlib ``compress_level``, with the
     resolution ``dpi`` (level 1: about 0.07 s for a k = 10 sheet; a hand-written Sub-filter encoder measured
-    0.03 s, not worth owning: ``bench/RESULTS_render.md``)."""
+    0.03 s, not worth owning: ``docs/benchmarks/render-cost.md``)."""
     import io
 
     from PIL import Image
