@@ -36,7 +36,7 @@ PACKAGES = ("stiefel", "objectives", "mesh", "stiefel_cmm.cli")
 KNOWN_BROKEN: frozenset[tuple[str, str]] = frozenset()
 
 _CODE_SPAN = re.compile(r"(`+)(.+?)(?<!`)\1(?!`)", re.S)
-_PROJECT_NAME = re.compile(r"(?<![\w.])(?:%s)(?:\.[A-Za-z_]\w*)+" % "|".join(PACKAGES))
+_PROJECT_NAME = re.compile(r"(?<![\w./])(?:%s)(?:\.[A-Za-z_]\w*)+" % "|".join(PACKAGES))
 
 
 @dataclass(frozen=True, order=True)

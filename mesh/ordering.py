@@ -58,7 +58,7 @@ def reorder(m: Mesh) -> tuple[Mesh, Int[np.ndarray, " n"]]:
     """Reverse Cuthill–McKee renumbering (bandwidth reduction) of the vertex graph.
 
     Neighbouring vertices get nearby indices, so the gathers of the ELL matvec
-    ``W @ X`` touch nearby memory (measured in ``bench/RESULTS_mesh.md``).
+    ``W @ X`` touch nearby memory (measured in ``docs/benchmarks/mesh.md``).
     Never applied silently: returns ``(permute(m, perm), perm)``; map results
     back with ``X_original = X_reordered[inverse_permutation(perm)]``.
     """

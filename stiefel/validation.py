@@ -1,4 +1,4 @@
-"""Checks of options and inputs where they enter a public function (issue 19).
+"""Checks of options and inputs where they enter a public function.
 
 Each validator raises a named error (``ParameterError`` unless ``error=`` says otherwise, e.g.
 ``objectives.SolverOptionError``) whose message names the parameter, the value and the allowed

@@ -1,4 +1,4 @@
-"""The CLI's outputs are all-or-nothing (issue 19, item 1) and its options reach the solvers.
+"""The CLI's outputs are all-or-nothing and its options reach the solvers.
 
 Runs use the built-in demo mesh with ``--method admm --max-iters 3`` (host numpy, no JAX
 compilation: a fraction of a second) and ``--no-png`` unless the picture is the point. Faults

@@ -174,7 +174,7 @@ def test_eigenpairs_are_computed_once_and_only_when_used(demo, monkeypatch):
 
 
 REFERENCE = [  # solver, expected objective and iterations under the keyword API (module docstring)
-    # padded to its size bucket (issue 17); the last stage stops at saddle_ftol for a saddle check, then at ftol
+    # padded to its size bucket; the last stage stops at saddle_ftol for a saddle check, then at ftol
     # (saddle_ftol 1e-5 → 1e-4: 111 → 115 iterations, objective 99.44147248835037 → 7e-9 relative lower)
     (lambda U: BlockCMM(max_iters=600), 99.4414717747638, 115),
     (lambda U: BlockCMM(optimizer="lbfgs", preconditioner="active_set", refresh=25, max_iters=600),
@@ -185,7 +185,7 @@ REFERENCE = [  # solver, expected objective and iterations under the keyword API
     (lambda U: ADMMCMM(max_iters=1500), 99.44072080719769, 826),
     (lambda U: ADMMCMM(variant="thesis", rho=100.0, adapt_rho=False, max_iters=400), 101.64362320413419, 400),
     (lambda U: SequentialADMMCMM(max_iters=4 * 300), 101.36805268621117, 430),  # a total (was 300 per mode)
-    # local functions with the corrected distance and per-sample radii (issue 20)
+    # local functions with the corrected distance and per-sample radii
     (lambda U: FastCMM(U, max_iters=800), 100.00975961204125, 800),
 ]
 

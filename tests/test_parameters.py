@@ -1,4 +1,4 @@
-"""Every parameter is checked where it enters (issue 19): a named error, naming the parameter, before
+"""Every parameter is checked where it enters: a named error, naming the parameter, before
 any work; ``max_iters`` is the total number of iterations of a call, for every method."""
 
 from __future__ import annotations

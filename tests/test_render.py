@@ -1,8 +1,7 @@
-"""The PNG contact sheets (stiefel_cmm.stiefel_cmm/cli/render.py, stiefel_cmm.stiefel_cmm/cli/render_views.py, stiefel_cmm.stiefel_cmm/cli/raster.py): the z-buffer rasteriser paints the right
+"""The PNG contact sheets (stiefel_cmm/cli/render.py, stiefel_cmm/cli/render_views.py, stiefel_cmm/cli/raster.py): the z-buffer rasteriser paints the right
 faces; meshes are oriented by their principal axes (a flat patch face-on, the same picture however the
 mesh is rotated) or by ``up=``; colours are symmetric about 0 with a colour bar and labelled rows and
-columns; the grid of smoothings × modes; rendering memory does not grow with the number of faces
-(project issue 19, item 5)."""
+columns; the grid of smoothings × modes; rendering memory does not grow with the number of faces."""
 
 from __future__ import annotations
 

@@ -5,7 +5,7 @@
 * ``rho`` — the rules for the penalty parameter ρ.
 * ``fast`` — the fast approximation on a space of local functions.
 
-The names of ``splitting`` are available here too (``objectives.admm.admm``).
+The names of ``splitting`` are available here too (``from objectives.admm import admm``).
 """
 
 from . import fast, rho, splitting

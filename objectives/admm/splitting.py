@@ -53,7 +53,7 @@ class ADMMOptions:
     other, checked every ``adapt_every`` iterations; ``objectives.admm.rho.RhoRule``): ``"increase"``
     (default) only ever raises ρ, ``True``/``"both"`` also lowers it when the dual residual dominates both
     raw and relative to Boyd's tolerance scales (recovers from a too-stiff ρ₀; on meshes where ρ₀ is
-    right it reaches the same objectives but converges less often: ``bench/RESULTS_admm_rho.md``),
+    right it reaches the same objectives but converges less often: ``docs/benchmarks/admm-rho.md``),
     ``False`` keeps ρ fixed; eps_abs, eps_rel: stopping
     tolerances; max_iters: the total number of iterations of a call (``admm_sequential``: shared fairly by the
     modes), an integer in ``[1, 2³¹ − 1]``; variant: ``"exact"`` or ``"thesis"``; time_limit (s). Checked on

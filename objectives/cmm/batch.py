@@ -216,7 +216,7 @@ def cmm_batch(
         faster in every measured case (B = 8 to convergence: vmap at 0.51–0.54× the loop's speed on
         fandisk, n = 7229; 0.59–0.92× on starfish and hand_868 — the batch runs until its slowest
         member stops, and a member-iteration costs about as much batched as alone;
-        ``bench/RESULTS_batch.md``), the vmapped program on an accelerator. ``BatchResult.mode``
+        ``docs/benchmarks/batch.md``), the vmapped program on an accelerator. ``BatchResult.mode``
         says which ran.
       callback_vmap, solve_backend: how the shifted preconditioner is solved and batched
         (``cmm_problem``).

@@ -146,7 +146,7 @@ class _SmoothedSolver(CMMSolver):
     per-stage ``gtol``; ``max_iters``, the total number of iterations of the solve, shared by the stages
     in turn (each gets what the earlier ones left; once it is spent the remaining stages are skipped and
     the status is ``max_iters``), an integer in ``[1, 2³¹ − 1]``; σ of ``(W + σA)⁻¹`` (None: λ_{k−1}, the
-    largest of the first k eigenvalues, λ₁ for k ≤ 2 — the scale of the modes sought, ``bench/RESULTS.md``);
+    largest of the first k eigenvalues, λ₁ for k ≤ 2 — the scale of the modes sought, ``docs/benchmarks/cmm.md``);
     ``runtime_smoothing``: the smoothing as a runtime value of the compiled solver (``lax.switch`` over the
     ten, ``objectives.energy.energies.CMMEnergy``), so solvers differing only in ``smoothing`` share one
     compilation — for comparisons; measured on fandisk (k = 8–10): 2.0–2.5× the compile time of one
@@ -211,7 +211,7 @@ class BlockCMM(_SmoothedSolver):
 
     continuation: smoothing stages (default 4: δ = 0.1 → target); intermediate stages end once the
       smoothed objective decreased by less than ``stage_ftol`` (relative) over ``stage_window``
-      iterations, so they only settle the modes' arrangement (``bench/RESULTS.md``: iterations to
+      iterations, so they only settle the modes' arrangement (``docs/benchmarks/cmm.md``: iterations to
       ADMM's best 337 → 67 on camelhead, k = 10); the last runs to ``gtol`` or ``ftol`` (relative
       decrease over 20 iterations — the gradient can stall above gtol in the rounding regime).
     optimizer: ``"cg"`` (Riemannian CG) or ``"lbfgs"`` (each active-set round restarts its memory).
@@ -229,7 +229,7 @@ class BlockCMM(_SmoothedSolver):
       point). The result records each (θ, step, decrease, iteration) in ``params["saddles"]``. Measured on
       example:bumpy (k = 10, μ = 2λ₉): the stall test had stopped on a saddle's plateau at 1802.50
       (θ = −89); with the checks the solve ends within 0.011 % of ADMM's objective
-      (``bench/RESULTS_saddle.md``). ``saddle_ftol`` 1e-5 → 1e-4 (the first check sooner) brought it within
+      (``docs/benchmarks/saddle.md``). ``saddle_ftol`` 1e-5 → 1e-4 (the first check sooner) brought it within
       0.1 % of ADMM's objective at iteration 544 instead of 706 (2457 → 1990 in all), the same iteration as
       before on five other meshes, the same final objectives (torus: lower, 1881.13 for 1881.23, in 1915
       iterations instead of 646).

@@ -1,5 +1,5 @@
 """Second-order finish of the smoothed CMM energy: a curvature-aware preconditioner and the trust-region
-polish of ``BlockCMM`` (issues 18 and 22; docs/maths.md §9, eqs. 9.13 and 9.19).
+polish of ``BlockCMM`` (docs/maths.md §9, eqs. 9.13 and 9.19).
 
 The Euclidean Hessian of ``F(X) = tr(XᵀWX) + μ Σ_ij w_i s(X_ij)`` acts column by column as
 

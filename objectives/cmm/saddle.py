@@ -1,4 +1,4 @@
-"""Saddle checks of the block CMM solver's final stage (issue 18; docs/maths.md §9, ``stiefel.solvers.saddle``).
+"""Saddle checks of the block CMM solver's final stage (docs/maths.md §9, ``stiefel.solvers.saddle``).
 
 The smoothed CMM energy has saddle points whose neighbourhood is a long plateau: started from the
 eigenbasis, the block solver on ``example:bumpy`` (k = 10, μ = 2λ₉) creeps along one from iteration

@@ -9,7 +9,7 @@ shape ``(n,)`` or ``(n, k)``. Three implementations:
 * ``SparseOperator`` — a ``scipy.sparse`` matrix stored as a padded
   neighbour table ("ELL": ``(n, w)`` column indices and values, ``w`` the
   largest row length). ``mv`` is ``w`` fused gathers with no scatter, which on
-  CPU beat BCOO and ``segment_sum`` (see ``bench/RESULTS.md``). ``solve``
+  CPU beat BCOO and ``segment_sum`` (see ``docs/benchmarks/cmm.md``). ``solve``
   uses one sparse factorisation computed on the host at construction
   (``stiefel.linalg.ffi_solve``: CHOLMOD as an XLA custom call through ``sparsax``, when JAX's x64 mode is
   on — no Python callback, so compiled solvers are served from JAX's persistent cache; otherwise

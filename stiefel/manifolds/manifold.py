@@ -43,7 +43,7 @@ class GeneralizedStiefel(eqx.Module):
       n: the number of rows, for ``M = None`` only.
       metric: ``"euclidean"`` (``tr(Z1ᵀMZ2)``) or ``"canonical"``
         (``tr(Z1ᵀM(I − ½XXᵀM)Z2)``).
-      retraction: ``"polar"`` (default: the fastest per iteration, bench/RESULTS_peers.md), ``"cholesky"``,
+      retraction: ``"polar"`` (default: the fastest per iteration, docs/benchmarks/peers.md), ``"cholesky"``,
         ``"cayley"`` (low-rank, the thesis's); for ``k = 1`` also ``"radial"`` and ``"periodic"``.
       check: validate that M is SPD (raises ``NotSPDError``).
       dtype: dtype of the stored operator (default float64 when x64 is enabled).
@@ -247,7 +247,7 @@ class GeneralizedStiefel(eqx.Module):
                 "use manifold.project_to_manifold(X) to move it onto the manifold"
             )
 
-    # pymanopt-style aliases, documented once (README: "Names from pymanopt and Manopt").
+    # pymanopt-style aliases, documented once (docs/tutorial.md, "Coming from pymanopt or Manopt").
     projection = proj
     to_tangent_space = proj
     inner_product = inner

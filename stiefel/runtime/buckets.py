@@ -16,7 +16,7 @@ import math
 __all__ = ["bucket", "width_bucket", "check_growth", "DEFAULT_GROWTH"]
 
 #: growth of the size grid used by default (``BlockCMM.bucket_growth``). Measured on fandisk (k = 10,
-#: ``bench/RESULTS_first_run.md``): padding by 10 / 20 / 40 % costs about 4 / 7 / 22 % more time per
+#: ``docs/benchmarks/first-run.md``): padding by 10 / 20 / 40 % costs about 4 / 7 / 22 % more time per
 #: iteration, so 1.1 (padding 0–10 %, mean 5 %) costs ≲ 4 % (mean ≈ 2 %) and still lets meshes within
 #: about 10 % of each other's size share a program
 DEFAULT_GROWTH = 1.1

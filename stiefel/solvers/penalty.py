@@ -114,7 +114,7 @@ def penalty_minimize(fn: Callable, manifold: GeneralizedStiefel, X0, *, args: An
         each stage warm-started from the previous minimiser (continuation). Measured on the test
         problem (n = 60, k = 3, tol 1e-9): ρ = 10 → 100 → 1000 took 636 + 1045 + 2325 iterations, a cold
         ρ = 1000 solve 4759, a modest gain; for the projected point alone one small ρ converges fastest
-        (636 iterations at ρ = 10), see ``bench/RESULTS_penalty.md``.
+        (636 iterations at ρ = 10), see ``docs/benchmarks/penalty.md``.
       maxiter: L-BFGS iteration limit per ρ stage (an integer in ``[1, 2³¹ − 1]``; jaxopt's loop bound is
         static, so each stage gets the same cap and the total is at most ``stages × maxiter``).
       tol: per-stage stop when ‖∇P_ρ(X)‖_F ≤ tol (> 0).

@@ -1,4 +1,4 @@
-"""Command-line front door: ``stiefel modes | eigs | compare-smoothings`` (issue 6).
+"""Command-line front door: ``stiefel modes | eigs | compare-smoothings | view``.
 
 The CLI sits on top of the layers (``mesh``, ``objectives``, ``stiefel``) and is
 the only place that switches JAX to float64 (``jax_enable_x64``, in ``main``).

@@ -38,7 +38,7 @@ __all__ = ["checked", "add_laplacian_options", "add_cmm_options", "smoothing_nam
 GTOL = 1e-6
 SMOOTHING_NAMES = tuple(f"f{i}" for i in range(10))  # objectives.energy.smoothings.NAMES
 METHODS = ("block", "sequential", "admm", "admm_sequential", "fast")  # objectives.cmm.solvers.SOLVERS
-#: the default sparsity weight: twice λ_{k−1} (``bench/RESULTS_defaults.md``: visibly localised modes on every
+#: the default sparsity weight: twice λ_{k−1} (``docs/benchmarks/defaults.md``: visibly localised modes on every
 #: test mesh, the same balance on coarse and fine meshes of one shape)
 DEFAULT_MU = "2λ"
 DEFAULT_WEIGHTING = "area"

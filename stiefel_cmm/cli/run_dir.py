@@ -1,4 +1,4 @@
-"""One run's output directory, written all or nothing by one run at a time (issue 19).
+"""One run's output directory, written all or nothing by one run at a time.
 
 ``RunDir(path, command, outputs=…, owned=…)`` is a context manager:
 
