@@ -7,12 +7,12 @@ import pytest
 import scipy.linalg as sla
 
 import mesh
-from mesh_fixtures import SMALL, grid, shared_mesh, sphere
+from mesh_fixtures import SURFACES, grid, sphere, surface
 
 
-@pytest.mark.parametrize("name", SMALL)
+@pytest.mark.parametrize("name", SURFACES)
 def test_dijkstra_distance_is_a_shortest_path_tree(name):
-    m = shared_mesh(name)
+    m = surface(name)
     src = [0, m.n_vertices // 2]
     D = mesh.geodesic_distance(m, src)
     e = m.edges
@@ -45,7 +45,7 @@ def test_geodesics_on_the_sphere(method, tol):
 
 
 def test_dijkstra_limit():
-    m = shared_mesh("bumpy.off")
+    m = surface("bumpy")
     full = mesh.geodesic_distance(m, 3)
     r = np.median(full)
     cut = mesh.geodesic_distance(m, 3, limit=r)
@@ -55,7 +55,7 @@ def test_dijkstra_limit():
 
 
 def test_geodists_deltas_normdist():
-    m = mesh.scaled_to_unit_area(shared_mesh("bumpy.off"))
+    m = mesh.scaled_to_unit_area(surface("bumpy"))
     assert abs(m.total_area - 1) < 1e-12
     lm = mesh.landmarks(m)
     G = mesh.geodists(m, lm)
@@ -87,8 +87,8 @@ def test_hks_with_a_full_eigenbasis():
     np.testing.assert_allclose(H[:, -1], 1.0, rtol=1e-2)  # → 1/total area as t → ∞ (total area 1)
 
 
-def test_hks_wks_from_shared_mesh():
-    lap = mesh.laplacian(shared_mesh("bumpy.off"), area="fem")
+def test_hks_wks_from_a_mesh_basis():
+    lap = mesh.laplacian(surface("bumpy"), area="fem")
     evals, evecs = mesh.eigenbasis(lap, 60)
     times = mesh.hks_times(evals, 30)
     np.testing.assert_allclose(times[[0, -1]], 4 * np.log(10) / evals[[-1, 9]], rtol=1e-12)

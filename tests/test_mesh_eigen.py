@@ -10,14 +10,14 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 
 import mesh
-from mesh_fixtures import quiet_load, shared_mesh, sphere, two_spheres
+from mesh_fixtures import quiet_load, sphere, surface, two_spheres
 
 CASES = [
-    ("hand_868.obj", "lumped"),
-    ("decimated-knight.off", "mixed"),
-    ("bumpy.off", "fem"),
-    ("hand_868_holes2.obj", "lumped"),
-    ("hand_868_holes2.obj", "fem"),
+    ("torus", "lumped"),
+    ("hand", "mixed"),
+    ("bumpy", "fem"),
+    ("torus_holes", "lumped"),
+    ("torus_holes", "fem"),
 ]
 
 
@@ -33,7 +33,7 @@ def _check_pairs(lap, evals, evecs, ortho_tol=1e-10):
 
 @pytest.mark.parametrize("name, area", CASES)
 def test_eigenpairs_are_A_orthonormal_and_solve_the_problem(name, area):
-    m = shared_mesh(name)
+    m = surface(name)
     lap = mesh.laplacian(m, area=area)
     evals, evecs = mesh.eigenbasis(lap, 12)
     _check_pairs(lap, evals, evecs)
@@ -44,7 +44,7 @@ def test_eigenpairs_are_A_orthonormal_and_solve_the_problem(name, area):
 
 
 def test_matches_dense_generalised_eigh():
-    lap = mesh.laplacian(shared_mesh("decimated-knight.off"), area="fem")
+    lap = mesh.laplacian(surface("hand"), area="fem")
     evals, _ = mesh.eigenbasis(lap, 20)
     ref = sla.eigh(lap.W.toarray(), lap.A.toarray(), eigvals_only=True, subset_by_index=[0, 19])
     np.testing.assert_allclose(evals[1:], ref[1:], rtol=1e-9)
@@ -52,13 +52,13 @@ def test_matches_dense_generalised_eigh():
 
 
 def test_eigenvalues_scale_inversely_with_area():
-    lap = mesh.laplacian(shared_mesh("bumpy.off"))
+    lap = mesh.laplacian(surface("bumpy"))
     mu = 7.5
     scaled = replace(lap, A=sp.csr_array(lap.A * mu))
     e1, _ = mesh.eigenbasis(lap, 8)
     e2, _ = mesh.eigenbasis(scaled, 8)
     np.testing.assert_allclose(e2[1:], e1[1:] / mu, rtol=1e-10)
-    raw = mesh.laplacian(shared_mesh("bumpy.off"), normalize_area=False)
+    raw = mesh.laplacian(surface("bumpy"), normalize_area=False)
     e3, _ = mesh.eigenbasis(raw, 8)
     np.testing.assert_allclose(e3[1:], e1[1:] * lap.area_scale, rtol=1e-10)
 
@@ -94,7 +94,7 @@ def test_bad_k():
 
 
 def test_graph_laplacian_with_uniform_area():
-    lap = mesh.laplacian(shared_mesh("decimated-knight.off"), weights="graph", area="uniform")
+    lap = mesh.laplacian(surface("hand"), weights="graph", area="uniform")
     evals, evecs = mesh.eigenbasis(lap, 6)
     _check_pairs(lap, evals, evecs)
     # A = I/n: eigenvalues are n × those of Deg − Adj
@@ -103,9 +103,9 @@ def test_graph_laplacian_with_uniform_area():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["armadillo_25479.obj", "camelhead.off"])
+@pytest.mark.parametrize("name", ["quadruped_large", "patch_large"])
 def test_eigenpairs_large(name):
-    lap = mesh.laplacian(shared_mesh(name), area="fem")
+    lap = mesh.laplacian(surface(name), area="fem")
     evals, evecs = mesh.eigenbasis(lap, 50)
     _check_pairs(lap, evals, evecs)
     assert abs(evals[0]) <= 1e-9 * evals[1]

@@ -9,20 +9,25 @@ import pytest
 import trimesh
 
 import mesh
-from mesh_fixtures import grid, quiet_load, shared_mesh, shared_path, sphere, two_spheres
+from mesh_fixtures import (DATA, LARGE_SURFACES, SURFACES, TOPOLOGY, grid, quiet_load, sphere, surface,
+                           surface_arrays, two_spheres, write_mesh)
 
 # every cleaning step warns once (MeshCleaningWarning); tests/test_mesh_loading_faults.py checks that
 pytestmark = pytest.mark.filterwarnings("ignore::mesh.MeshCleaningWarning")
 
 
-@pytest.mark.parametrize(
-    "name, chi, loops",
-    [("hand_868.obj", 0, 0), ("decimated-knight.off", 2, 0), ("bumpy.off", 2, 0), ("hand_868_holes2.obj", -4, 4)],
-)
-def test_shared_small_meshes_topology(name, chi, loops):
-    m = shared_mesh(name)
+@pytest.mark.parametrize("suffix", [".obj", ".off", ".ply"])
+@pytest.mark.parametrize("name", SURFACES)
+def test_small_surfaces_load_from_files_with_their_topology(tmp_path, name, suffix):
+    """The generated surfaces written to files and read back: exact coordinates, nothing to clean, and the
+    topology they stand in for (a closed torus, a torus with four holes, closed genus-0 surfaces)."""
+    V, F = surface_arrays(name)
+    m = mesh.load(write_mesh(tmp_path / f"{name}{suffix}", V, F))
     assert m.vertices.dtype == np.float64 and m.vertices.shape[1] == 3
     assert m.faces.shape[1] == 3 and m.faces.min() == 0 and m.faces.max() == m.n_vertices - 1
+    np.testing.assert_array_equal(m.vertices, V)
+    np.testing.assert_array_equal(m.faces, F)
+    chi, loops = TOPOLOGY[name]
     assert m.n_components == 1
     assert m.euler_characteristic == chi
     assert m.n_boundary_loops == loops
@@ -30,29 +35,64 @@ def test_shared_small_meshes_topology(name, chi, loops):
     assert not m.report.changed
 
 
-def test_horse_normals_do_not_split_vertices():
-    # 976 positions, 5844 normals, faces "f v//vn": the strict OBJ reader indexes positions, so
-    # nothing needs cleaning (trimesh split every position per normal: 5844 vertices, merged back)
-    m = mesh.load(shared_path("horse_976.obj"))
+@pytest.mark.parametrize("name", ["torus", "torus_holes", "hand", "quadruped"])
+def test_generated_surfaces_are_irregular_like_scans(name):
+    """The stand-ins for scanned meshes are irregular as scans are: many obtuse triangles and negative
+    cotangent weights; their faces are oriented consistently, outwards where the surface is closed."""
+    m = surface(name)
+    V, F = m.vertices, m.faces
+    e = [V[F[:, (i + 1) % 3]] - V[F[:, i]] for i in range(3)]
+    obtuse = sum(int(np.sum(np.einsum("ij,ij->i", e[i], -e[i - 1]) < 0)) for i in range(3))
+    assert obtuse > 0.3 * m.n_faces
+    assert mesh.laplacian(m).n_negative_weights > 0.1 * m.n_vertices
+    t = trimesh.Trimesh(V, F, process=False)
+    assert t.is_winding_consistent and (not m.is_closed or t.volume > 0)
+
+
+def test_normals_do_not_split_vertices():
+    # 6 positions, 24 normals (one per face corner), faces "f v//vn" (as horse_976.obj): the strict OBJ
+    # reader indexes positions, so nothing needs cleaning (trimesh split every position per normal)
+    path = DATA / "octahedron_normals.obj"
+    assert path.read_text().count("\nvn ") == 24
+    m = mesh.load(path)
     r = m.report
-    assert r.input_vertices == 976 and r.input_faces == 1948
-    assert m.n_vertices == 976 and m.n_faces == 1948
+    assert r.input_vertices == 6 and r.input_faces == 8
+    assert m.n_vertices == 6 and m.n_faces == 8
     assert not r.changed and r.lines() == []
     assert m.n_components == 1 and m.is_closed and m.euler_characteristic == 2
+    np.testing.assert_allclose(m.total_area, 8 * np.sqrt(3) / 2, rtol=1e-14)  # eight faces of edge √2
 
 
-def test_cube_40k_volume_faces_raise_non_manifold():
+def _fan_triangles(path):
+    """The triangles the fan ``(a, b, c, d) → (a, b, c), (a, c, d)`` makes of the file's quads (0-based)."""
+    quads = np.array([line.split()[1:] for line in path.read_text().splitlines() if line.startswith("f ")], int) - 1
+    return np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]]), len(quads)
+
+
+def test_volume_faces_raise_non_manifold():
+    # a 2 × 2 × 2 grid of cubes, six tetrahedra per cube, each written as a 4-corner "face" (as cube_40k.obj)
+    path = DATA / "volume_grid.obj"
     with pytest.raises(mesh.NonManifoldError) as info:
-        mesh.load(shared_path("cube_40k.obj"))
+        mesh.load(path)
     msg = str(info.value)
     assert "non-manifold edge" in msg and "e.g. edge (" in msg and "repair" in msg
     assert isinstance(info.value, ValueError) and isinstance(info.value, mesh.MeshError)
     assert "allow_nonmanifold=True" in msg
-    # its 4-corner "faces" are tetrahedra: on request it loads, every count reported
-    m = mesh.load(shared_path("cube_40k.obj"), allow_nonmanifold=True)
+    # its 4-corner "faces" are tetrahedra: on request it loads, every count reported. The fan of the path
+    # 000 → e_a → e_a + e_b → 111 gives (000, e_a, e_a + e_b), six different ones per cube, and
+    # (000, e_a + e_b, 111), three different ones twice: 8 × 3 repeated faces, 8 × 9 kept
+    m = mesh.load(path, allow_nonmanifold=True)
     r = m.report
-    assert (r.triangulated_quads, r.nonplanar_polygons, r.dropped_duplicate_faces) == (48000, 48000, 8000)
-    assert m.n_nonmanifold_edges == r.n_nonmanifold_edges == 55580 and not m.is_edge_manifold
+    assert (r.triangulated_quads, r.nonplanar_polygons, r.dropped_duplicate_faces) == (48, 48, 24)
+    fans, n_quads = _fan_triangles(path)
+    assert n_quads == 48 and m.n_vertices == 27
+    kept = np.unique(np.sort(fans, axis=1), axis=0)
+    assert len(kept) == m.n_faces == 72
+    np.testing.assert_array_equal(np.unique(np.sort(m.faces, axis=1), axis=0), kept)
+    _, count = np.unique(np.sort(np.concatenate([kept[:, [0, 1]], kept[:, [1, 2]], kept[:, [0, 2]]]), axis=1),
+                             axis=0, return_counts=True)
+    assert m.n_nonmanifold_edges == r.n_nonmanifold_edges == int(np.sum(count > 2)) == 50
+    assert not m.is_edge_manifold
 
 
 def test_nan_coordinate_of_a_used_vertex_raises():
@@ -173,13 +213,10 @@ def test_trimesh_source_and_merge_switch():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(
-    "name, chi, loops",
-    [("bunny.off", 2, 0), ("fandisk.off", 2, 0), ("camelhead.off", 1, 1), ("armadillo_25479.obj", 2, 0)],
-)
-def test_shared_large_meshes_topology(name, chi, loops):
-    m = shared_mesh(name)
-    assert (m.euler_characteristic, m.n_boundary_loops, m.n_components) == (chi, loops, 1)
+@pytest.mark.parametrize("name", LARGE_SURFACES)
+def test_large_surfaces_topology(tmp_path, name):
+    m = mesh.load(write_mesh(tmp_path / f"{name}.off", *surface_arrays(name)))
+    assert (m.euler_characteristic, m.n_boundary_loops, m.n_components) == (*TOPOLOGY[name], 1)
     assert not m.report.changed
 
 
@@ -201,3 +238,24 @@ def test_polygons_in_files_are_reported(tmp_path):
     m = mesh.load(off)
     assert m.n_faces == 3 and m.report.triangulated_polygons == 1
     np.testing.assert_allclose(m.total_area, 1.25)
+
+
+@pytest.mark.parametrize("ci", ["", "1"])
+def test_ci_fails_a_test_that_skips_for_a_missing_mesh(monkeypatch, ci):
+    """tests/conftest.py: with CI set, a skip whose reason names a missing mesh or file is a failure."""
+    import conftest
+    from _pytest.reports import TestReport
+
+    monkeypatch.setenv("CI", ci)
+
+    def outcome(reason: str) -> str:
+        report = TestReport("t.py::t", ("t.py", 0, "t"), {}, "skipped", ("t.py", 1, f"Skipped: {reason}"), "call")
+        hook = conftest.pytest_runtest_makereport(None, None)
+        next(hook)
+        with pytest.raises(StopIteration) as done:
+            hook.send(report)
+        return done.value.value.outcome
+
+    for reason in ("shared mesh hand_868.obj not found under /x", "/x/hand_868.obj not present"):
+        assert outcome(reason) == ("failed" if ci else "skipped")
+    assert outcome("no chromium binary (apt-get install chromium)") == "skipped"

@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import mesh
-from mesh_fixtures import SMALL, grid, shared_mesh
+from mesh_fixtures import CLOSED_SURFACES, SURFACES, grid, sphere, surface
 
 
 def _bandwidth(M) -> int:
@@ -19,10 +19,10 @@ def _bandwidth(M) -> int:
     return int(np.max(np.abs(c.row - c.col)))
 
 
-@pytest.mark.parametrize("name", SMALL)
+@pytest.mark.parametrize("name", SURFACES)
 @pytest.mark.parametrize("weights, area", [("cotangent", "lumped"), ("cotangent", "fem"), ("graph", "degree"), ("cotangent", "mixed")])
 def test_permuted_copy_is_isometric(name, weights, area):
-    m = shared_mesh(name)
+    m = surface(name)
     perm = np.random.default_rng(3).permutation(m.n_vertices)
     n = mesh.permute(m, perm)
     np.testing.assert_array_equal(n.vertices, m.vertices[perm])
@@ -35,17 +35,19 @@ def test_permuted_copy_is_isometric(name, weights, area):
     assert not mesh.is_isometric(lp, ln, np.roll(perm, 1))
 
 
-@pytest.mark.parametrize("name", ["hand_868.obj", "decimated-knight.off", "bumpy.off"])
+@pytest.mark.parametrize("name", [*CLOSED_SURFACES, "sphere"])
 def test_eigenfunctions_permute(name):
-    m = shared_mesh(name)
+    # the icosphere's symmetry makes its eigenvalues repeat exactly (multiplicities 1, 3, 5): k = 9 ends a cluster
+    m, k = (sphere(3), 9) if name == "sphere" else (surface(name), 10)
     perm = np.random.default_rng(5).permutation(m.n_vertices)
     lp = mesh.laplacian(m)
     ln = mesh.laplacian(mesh.permute(m, perm))
-    ep, Vp = mesh.eigenbasis(lp, 10)
-    en, Vn = mesh.eigenbasis(ln, 10)
+    ep, Vp = mesh.eigenbasis(lp, k)
+    en, Vn = mesh.eigenbasis(ln, k)
     np.testing.assert_allclose(en, ep, rtol=1e-9, atol=1e-9)
-    # group (numerically) repeated eigenvalues; bumpy.off is sphere-like with multiplicities 3, 2, 3
+    # group (numerically) repeated eigenvalues
     cluster = np.concatenate([[0], np.cumsum(np.diff(ep) > 1e-6 * ep[-1])])
+    assert (np.bincount(cluster).tolist() == [1, 3, 5]) == (name == "sphere")
     for c in np.unique(cluster):
         idx = np.flatnonzero(cluster == c)
         a, b = Vn[:, idx], Vp[perm][:, idx]  # φ_N = Π φ_P (Prop. 3.4.12)
@@ -70,7 +72,7 @@ def test_affine_stretch_is_isometric_only_for_graph_weights():
 
 
 def test_reorder_reduces_bandwidth_and_is_an_isometry():
-    m = shared_mesh("hand_868.obj")
+    m = surface("torus")
     shuffled = mesh.permute(m, np.random.default_rng(0).permutation(m.n_vertices))
     r, perm = mesh.reorder(shuffled)
     l0, l1 = mesh.laplacian(shuffled), mesh.laplacian(r)
@@ -81,7 +83,7 @@ def test_reorder_reduces_bandwidth_and_is_an_isometry():
 
 
 def test_permute_rejects_non_permutations():
-    m = shared_mesh("decimated-knight.off")
+    m = surface("hand")
     with pytest.raises(ValueError, match="permutation"):
         mesh.permute(m, np.zeros(m.n_vertices, dtype=int))
 

@@ -9,7 +9,7 @@ import pytest
 import scipy.sparse as sp
 
 import mesh
-from mesh_fixtures import LARGE, SMALL, grid, shared_mesh, sphere
+from mesh_fixtures import LARGE_SURFACES, SURFACES, grid, sphere, surface
 
 igl = pytest.importorskip("igl")
 
@@ -35,21 +35,21 @@ def _check_against_igl(m: mesh.Mesh) -> None:
         assert _maxabs(A - A_igl) <= 1e-12 * _maxabs(A), area
 
 
-@pytest.mark.parametrize("name", SMALL)
+@pytest.mark.parametrize("name", SURFACES)
 def test_cotangent_and_mass_match_libigl(name):
-    _check_against_igl(shared_mesh(name))
+    _check_against_igl(surface(name))
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", LARGE)
+@pytest.mark.parametrize("name", LARGE_SURFACES)
 def test_cotangent_and_mass_match_libigl_large(name):
-    _check_against_igl(shared_mesh(name))
+    _check_against_igl(surface(name))
 
 
-@pytest.mark.parametrize("name", SMALL)
+@pytest.mark.parametrize("name", SURFACES)
 @pytest.mark.parametrize("weights", ["cotangent", "graph", "robust"])
 def test_weight_matrix_symmetric_rows_sum_to_zero(name, weights):
-    lap = mesh.laplacian(shared_mesh(name), weights=weights)
+    lap = mesh.laplacian(surface(name), weights=weights)
     W = lap.W
     s = _maxabs(W)
     assert _maxabs(W - W.T) <= 1e-14 * s
@@ -59,7 +59,7 @@ def test_weight_matrix_symmetric_rows_sum_to_zero(name, weights):
 
 @pytest.mark.parametrize("area", mesh.AREAS)
 def test_normalised_total_area_is_one(area):
-    m = shared_mesh("hand_868_holes2.obj")
+    m = surface("torus_holes")
     lap = mesh.laplacian(m, area=area)
     assert abs(lap.A.sum() - 1.0) <= 1e-13
     assert lap.is_diagonal_area == (area != "fem")
@@ -67,9 +67,9 @@ def test_normalised_total_area_is_one(area):
     np.testing.assert_allclose(lap.area_scale, 1.0 / raw, rtol=1e-14)
 
 
-@pytest.mark.parametrize("name", SMALL)
+@pytest.mark.parametrize("name", SURFACES)
 def test_surface_areas_sum_to_total_area(name):
-    m = shared_mesh(name)
+    m = surface(name)
     total = m.total_area
     for area in ("barycentric", "voronoi", "mixed", "fem", "lumped"):
         np.testing.assert_allclose(mesh.area_matrix(m, area).sum(), total, rtol=1e-12, err_msg=area)
@@ -102,7 +102,7 @@ def test_single_triangles_by_hand():
 
 
 def test_graph_and_degree():
-    m = shared_mesh("decimated-knight.off")
+    m = surface("hand")
     W = mesh.laplacian(m, weights="graph").W
     deg = W.diagonal()
     assert np.all(deg == np.round(deg)) and deg.sum() == 2 * len(m.edges)
@@ -116,7 +116,7 @@ def test_graph_and_degree():
 
 
 def test_cotangent_weights_scale_invariant_areas_scale_quadratically():
-    m = shared_mesh("bumpy.off")
+    m = surface("bumpy")
     m3 = replace(m, vertices=3.0 * m.vertices)
     a, b = mesh.laplacian(m, normalize_area=False), mesh.laplacian(m3, normalize_area=False)
     assert _maxabs(a.W - b.W) <= 1e-12 * _maxabs(a.W)
@@ -142,11 +142,11 @@ def test_negative_weights_counted_and_robust_laplacian_is_psd():
     assert abs(rob.A.sum() - 1) < 1e-13
 
 
-def test_counts_match_off_diagonal_signs_on_a_shared_mesh():
-    lap = mesh.laplacian(shared_mesh("hand_868.obj"))
+def test_counts_match_off_diagonal_signs_on_an_irregular_mesh():
+    lap = mesh.laplacian(surface("torus"))
     off = sp.triu(lap.W, 1)
     assert lap.n_negative_weights == int(np.sum(off.data > 1e-12 * _maxabs(lap.W))) > 0
-    assert mesh.robust_laplacian(shared_mesh("hand_868.obj")).n_negative_weights == 0
+    assert mesh.robust_laplacian(surface("torus")).n_negative_weights == 0
 
 
 def test_cotangent_laplacian_converges_on_the_sphere():

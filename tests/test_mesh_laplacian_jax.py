@@ -13,7 +13,7 @@ import pytest
 import mesh
 from stiefel_cmm.cli.demo_mesh import demo_mesh
 from mesh.laplacian_jax import AREAS_JAX
-from mesh_fixtures import SMALL, grid, shared_mesh
+from mesh_fixtures import SURFACES, grid, surface
 
 
 @functools.lru_cache(maxsize=None)
@@ -22,7 +22,7 @@ def _demo(subdivisions: int = 4) -> mesh.Mesh:
 
 
 def _mesh(name: str) -> mesh.Mesh:
-    return _demo() if name == "demo" else shared_mesh(name)
+    return _demo() if name == "demo" else surface(name)
 
 
 def _rel(x, ref) -> float:
@@ -31,7 +31,7 @@ def _rel(x, ref) -> float:
     return float(np.max(np.abs(np.asarray(x) - ref)) / np.max(np.abs(ref)))
 
 
-@pytest.mark.parametrize("name", [*SMALL, "demo"])
+@pytest.mark.parametrize("name", [*SURFACES, "demo"])
 def test_matches_scipy_assembly(name):
     m = _mesh(name)
     F = m.faces
@@ -56,7 +56,7 @@ def test_matches_scipy_assembly(name):
 
 
 def test_weight_operator_matches_bcoo():
-    m = shared_mesh("hand_868_holes2.obj")
+    m = surface("torus_holes")
     F = m.faces
     rng = np.random.default_rng(0)
     V, dV = jnp.asarray(m.vertices), jnp.asarray(rng.standard_normal((m.n_vertices, 3)))
@@ -84,8 +84,8 @@ def _probe(V, F, u, c):
 
 
 def test_derivatives_match_finite_differences():
-    # hand with holes: boundary edges carry one cotangent, obtuse faces exercise "mixed"
-    m = shared_mesh("hand_868_holes2.obj")
+    # torus with holes: boundary edges carry one cotangent, obtuse faces exercise "mixed"
+    m = surface("torus_holes")
     V, F = jnp.asarray(m.vertices), m.faces
     rng = np.random.default_rng(0)
     u, c = (jnp.asarray(rng.standard_normal(m.n_vertices)) for _ in range(2))
@@ -110,7 +110,7 @@ def test_derivatives_match_finite_differences():
 
 
 def test_jit_traces_once_for_moved_vertices():
-    m = shared_mesh("hand_868.obj")
+    m = surface("torus")
     F = m.faces
     traces = []
 

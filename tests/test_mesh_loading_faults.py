@@ -1,4 +1,4 @@
-"""Faults users met when loading meshes (issue 19, items 2–3): one test per class of fault.
+"""Faults users met when loading meshes: one test per class of fault.
 
 Bad files are written into ``tmp_path``; every error must be a named ``MeshError``
 whose message names the file and, for text formats, the line.
@@ -21,7 +21,7 @@ import pytest
 import trimesh
 
 import mesh
-from mesh_fixtures import MESH_DIR, sphere
+from mesh_fixtures import sphere, surface
 
 pytestmark = pytest.mark.filterwarnings("ignore::mesh.MeshCleaningWarning", "ignore::mesh.MultipleComponentsWarning")
 
@@ -53,11 +53,14 @@ def test_zero_area_is_judged_per_face_not_by_distant_parts():
         r = mesh.load((P, [[0, 1, 2], [0, 3, 1]])).report  # (0, 3, 1) collinear (to round-off)
         assert (r.dropped_zero_area_faces, r.output_faces) == (1, 1)
         assert r.examples["dropped_zero_area_faces"] == "face 1"
-    if (MESH_DIR / "hand_868.obj").is_file():
-        hand = mesh.load(MESH_DIR / "hand_868.obj")
-        Vh = np.vstack([hand.vertices, stray])
-        Fh = np.vstack([hand.faces, [[868, 869, 870]]])
-        assert mesh.load((Vh, Fh)).n_faces == 1737
+    # an irregular scan-sized surface (170 units across, face areas from 1 to 60 units²; hand_868.obj: 200, 0.7
+    # to 380) with the stray face far away keeps all its faces
+    scan = surface("torus")
+    Vs = 45.0 * scan.vertices
+    n, m = scan.n_vertices, scan.n_faces
+    assert np.ptp(Vs, axis=0).max() > 150 and mesh.load((Vs, scan.faces)).n_faces == m
+    Fs = np.vstack([scan.faces, [[n, n + 1, n + 2]]])
+    assert mesh.load((np.vstack([Vs, stray]), Fs)).n_faces == m + 1
 
 
 # ---------------------------------------------------------------- report: counts, lines, dict, one warning

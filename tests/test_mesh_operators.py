@@ -12,13 +12,13 @@ import pytest  # noqa: E402
 
 import mesh  # noqa: E402
 from stiefel.linalg.operators import DiagonalOperator, SparseOperator  # noqa: E402
-from mesh_fixtures import SMALL, shared_mesh  # noqa: E402
+from mesh_fixtures import SURFACES, surface  # noqa: E402
 
 
-@pytest.mark.parametrize("name", SMALL)
+@pytest.mark.parametrize("name", SURFACES)
 @pytest.mark.parametrize("area", ["lumped", "fem"])
 def test_jax_W_and_A_match_scipy(name, area):
-    lap = mesh.laplacian(shared_mesh(name), area=area)
+    lap = mesh.laplacian(surface(name), area=area)
     rng = np.random.default_rng(0)
     X = rng.standard_normal((lap.n, 10))
     x = X[:, 0]
@@ -34,7 +34,7 @@ def test_jax_W_and_A_match_scipy(name, area):
 
 
 def test_fem_area_solve_and_dtype():
-    lap = mesh.laplacian(shared_mesh("decimated-knight.off"), area="fem")
+    lap = mesh.laplacian(surface("hand"), area="fem")
     _, A_op = lap.operators(factor_area=True)
     b = np.random.default_rng(1).standard_normal((lap.n, 3))
     x = np.asarray(A_op.solve(jnp.asarray(b)))

@@ -8,7 +8,7 @@ import scipy.sparse.csgraph as csgraph
 
 import mesh
 from mesh.sampling import SLACK, SamplingError, bump, local_distance
-from mesh_fixtures import SMALL, grid, quiet_load, shared_mesh, two_spheres
+from mesh_fixtures import SURFACES, grid, quiet_load, surface, two_spheres
 
 
 def test_bump_polynomial():
@@ -24,9 +24,9 @@ def test_bump_polynomial():
     np.testing.assert_allclose(bump([0.5, 1.5, 1.0], np.array([1.0, 3.0, 0.5])), [0.5, 0.5, 0.0])
 
 
-@pytest.mark.parametrize("name", SMALL)
+@pytest.mark.parametrize("name", SURFACES)
 def test_poisson_disk_is_separated_and_maximal(name):
-    m = shared_mesh(name)
+    m = surface(name)
     samples, radius = mesh.poisson_disk_sample(m, n_samples=60, seed=1)
     assert 30 <= samples.size <= 120 and np.unique(samples).size == samples.size
     D = csgraph.dijkstra(mesh.edge_graph(m), directed=False, indices=samples)
@@ -39,7 +39,7 @@ def test_poisson_disk_accepts_a_one_sided_graph():
     """A user graph holding each edge in one direction only gives the same sample as edge_graph."""
     import scipy.sparse as sp
 
-    m = shared_mesh(SMALL[0])
+    m = surface(SURFACES[0])
     G = mesh.edge_graph(m)
     upper = sp.csr_array(sp.triu(G))
     assert upper.nnz * 2 == G.nnz
@@ -67,10 +67,10 @@ def _check_support_and_cover(m, lf, cover=(7, 15)):
 
 
 @pytest.mark.parametrize("distance", ["corrected", "dijkstra"])
-@pytest.mark.parametrize("name", SMALL)
+@pytest.mark.parametrize("name", SURFACES)
 def test_local_functions_partition_of_unity_full_rank_and_cover(name, distance):
     """Thesis §7.1: every local function's support holds between 7 and 15 other samples."""
-    m = shared_mesh(name)
+    m = surface(name)
     lf = mesh.local_functions(m, n_samples=80, seed=0, distance=distance)
     assert lf.distance == distance
     _check_support_and_cover(m, lf)
@@ -79,11 +79,13 @@ def test_local_functions_partition_of_unity_full_rank_and_cover(name, distance):
 
 
 @pytest.mark.parametrize("n_samples", [40, 150, 300])
-def test_cover_on_a_real_mesh_at_several_densities(n_samples):
-    """hand_868 (fingers, thin parts): the former single median ρ left 2–4 others at the worst sample."""
-    m = shared_mesh("hand_868.obj")
+def test_cover_on_thin_parts_at_several_densities(n_samples):
+    """A hand (fingers, thin parts): the former single median ρ left too few others at the worst sample."""
+    m = surface("hand")
     for seed in (0, 1):
-        _check_support_and_cover(m, mesh.local_functions(m, n_samples=n_samples, seed=seed))
+        lf = mesh.local_functions(m, n_samples=n_samples, seed=seed)
+        _check_support_and_cover(m, lf)
+        assert mesh.local_functions(m, samples=lf.samples, rho=lf.rho).coverage.min() < 7  # a test of the radii
 
 
 @pytest.mark.parametrize("name", ["patch", "starfish"])
@@ -109,7 +111,7 @@ def test_components_are_covered_separately():
 
 def test_explicit_samples_and_rho():
     """``rho=``: the thesis's single global radius, reproducing the former (plain Dijkstra) result exactly."""
-    m = shared_mesh("decimated-knight.off")
+    m = surface("hand")
     samples, r = mesh.poisson_disk_sample(m, n_samples=40)
     lf = mesh.local_functions(m, samples=samples, rho=2.5 * r, distance="dijkstra")
     assert lf.rho == 2.5 * r and np.all(lf.radii == 2.5 * r)
@@ -185,7 +187,7 @@ def test_folded_strip_keeps_the_two_arms_apart(distance):
 
 
 def test_local_functions_rejects_bad_input():
-    m = shared_mesh("decimated-knight.off")
+    m = surface("hand")
     samples, r = mesh.poisson_disk_sample(m, n_samples=40)
     bad_cover = [(7,), (7, 15, 20), (0, 5), (8, 7), (7.0, 15), (True, 15), "ab", 7, None, (-1, 3)]
     for cover in bad_cover:
@@ -217,9 +219,9 @@ def test_local_functions_rejects_bad_input():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["bunny.off", "fandisk.off"])
+@pytest.mark.parametrize("name", ["bumpy_large", "torus_large"])
 def test_local_functions_full_rank_large(name):
-    m = shared_mesh(name)
+    m = surface(name)
     lf = mesh.local_functions(m, n_samples=300, seed=0)
     np.testing.assert_allclose(lf.U.sum(axis=1), 1.0, atol=1e-14)
     s = np.linalg.svd(lf.U.toarray(), compute_uv=False)
