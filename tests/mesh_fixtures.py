@@ -35,7 +35,6 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
-import pytest
 import trimesh
 
 import mesh
@@ -182,31 +181,3 @@ def quiet_load(source, **kw) -> mesh.Mesh:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", mesh.MultipleComponentsWarning)
         return mesh.load(source, **kw)
-
-
-# ---- to be removed: the real scans under ../shared/meshes, still read by solver tests not yet converted
-# (test_bases, test_batch, test_differentiable_cmm, test_fmaps, test_precision, test_sharding). A skip
-# for a missing file fails when CI is set (tests/conftest.py). The mesh tests use none of these.
-
-MESH_DIR = Path(__file__).resolve().parents[2] / "shared" / "meshes"
-SMALL = ["hand_868.obj", "decimated-knight.off", "bumpy.off", "hand_868_holes2.obj"]
-LARGE = ["bunny.off", "fandisk.off", "camelhead.off", "armadillo_25479.obj"]
-CLOSED_SMALL = ["hand_868.obj", "decimated-knight.off", "bumpy.off"]
-
-
-def shared_path(name: str) -> Path:
-    """Path of a shared mesh; skips the test when the shared folder (or file) is missing."""
-    p = MESH_DIR / name
-    if not p.is_file():
-        pytest.skip(f"shared mesh {name} not found under {MESH_DIR}")
-    return p
-
-
-@functools.lru_cache(maxsize=None)
-def _load_cached(name: str) -> mesh.Mesh:
-    return mesh.load(MESH_DIR / name)
-
-
-def shared_mesh(name: str) -> mesh.Mesh:
-    shared_path(name)
-    return _load_cached(name)

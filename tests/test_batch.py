@@ -5,19 +5,19 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-import mesh
 import stiefel
 from objectives.cmm.batch import cmm_batch, cmm_problem, default_options
 from objectives.energy.energies import cmm_energy
 
-from mesh_fixtures import shared_mesh
+from example_meshes import hand_laplacian
 
 K = 4
 
 
 @pytest.fixture(scope="module")
 def lap():
-    return mesh.laplacian(shared_mesh("hand_868.obj"), weights="cotangent", area="lumped")
+    """The hand stand-in (tests/example_meshes.py: starfish, 642 vertices; it replaced hand_868.obj)."""
+    return hand_laplacian()
 
 
 def _assert_same(a, b, *, x_tol=1e-8):

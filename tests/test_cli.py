@@ -23,14 +23,21 @@ from stiefel_cmm.cli.demo_mesh import demo_mesh
 from stiefel_cmm.cli.main import main
 from stiefel_cmm.cli.outputs import parse_mu
 
+from example_meshes import hand_mesh, write_obj
+
 #: the block solver's stopping at gtol = 1e-6 is not bit-reproducible run to run (the same
 #: command converged in 413 iterations once and hit 5000 the next); tests use a looser
 #: tolerance and a cap so that they stay fast whatever happens
 FAST = ["--gtol", "1e-5", "--max-iters", "800"]
 REPO = Path(__file__).resolve().parents[1]
-MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
-HAND = MESHES / "hand_868.obj"
-needs_hand = pytest.mark.skipif(not HAND.is_file(), reason=f"{HAND} not present")
+
+
+@pytest.fixture(scope="module")
+def hand(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A mesh file for the runs on a given path: the hand stand-in of tests/example_meshes.py (the starfish
+    example at size 0, 642 vertices; it replaced hand_868.obj) written as an OBJ file."""
+    m = hand_mesh()
+    return write_obj(tmp_path_factory.mktemp("meshes") / "starfish_642.obj", m.vertices, m.faces)
 
 
 def _a_orthonormality(modes: np.ndarray, source) -> float:
@@ -141,10 +148,9 @@ def test_modes_finish_records_exact_sparsity(tmp_path: Path) -> None:
     assert diag["support_sizes"] == [int(c) for c in (modes != 0).sum(axis=0)] and diag["l1_residual"] < 1e-8
 
 
-@needs_hand
-def test_modes_hand_json_quiet(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+def test_modes_hand_json_quiet(hand: Path, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     out = tmp_path / "hand"
-    assert main(["modes", str(HAND), "-k", "3", "--mu", "5.2", "--weighting", "uniform", "--seed", "1",
+    assert main(["modes", str(hand), "-k", "3", "--mu", "5.2", "--weighting", "uniform", "--seed", "1",
                  "--json", *FAST, "--out", str(out)]) == 0
     captured = capsys.readouterr()
     summary = json.loads(captured.out)  # exactly one JSON object on stdout
@@ -153,14 +159,14 @@ def test_modes_hand_json_quiet(tmp_path: Path, capsys: pytest.CaptureFixture) ->
     assert summary["parameters"]["weighting"] == "uniform" and summary["seed"] == 1
     modes = np.load(out / "modes.npz")["modes"]
     assert modes.shape == (summary["mesh"]["n_vertices"], 3)
-    assert _a_orthonormality(modes, HAND) < 1e-10
+    assert _a_orthonormality(modes, hand) < 1e-10
     _check_png(out / "modes.png")
     # --quiet: nothing at all on stdout
-    assert main(["eigs", str(HAND), "-k", "3", "--quiet", "--out", str(tmp_path / "eigs")]) == 0
+    assert main(["eigs", str(hand), "-k", "3", "--quiet", "--out", str(tmp_path / "eigs")]) == 0
     assert capsys.readouterr().out == ""
     z = np.load(tmp_path / "eigs" / "eigs.npz")
     assert abs(z["eigenvalues"][0]) < 1e-8 and np.all(np.diff(z["eigenvalues"]) > 0)
-    assert _a_orthonormality(z["eigenvectors"], HAND) < 1e-10
+    assert _a_orthonormality(z["eigenvectors"], hand) < 1e-10
     import plyfile  # eigs writes the eigenfunctions as PLY fields and a contact sheet too
 
     ply = plyfile.PlyData.read(str(tmp_path / "eigs" / "eigs.ply"))
@@ -168,10 +174,9 @@ def test_modes_hand_json_quiet(tmp_path: Path, capsys: pytest.CaptureFixture) ->
     _check_png(tmp_path / "eigs" / "eigs.png")
 
 
-@needs_hand
-def test_compare_smoothings_subset(tmp_path: Path) -> None:
+def test_compare_smoothings_subset(hand: Path, tmp_path: Path) -> None:
     out = tmp_path / "cmp"
-    assert main(["compare-smoothings", str(HAND), "-k", "3", "--smoothings", "f3,f6", "--quiet", *FAST,
+    assert main(["compare-smoothings", str(hand), "-k", "3", "--smoothings", "f3,f6", "--quiet", *FAST,
                  "--out", str(out)]) == 0
     csv = (out / "comparison.csv").read_text().splitlines()
     assert csv[0].startswith("smoothing,name,c1_at_zero,status,objective,dirichlet,l1")
@@ -189,10 +194,9 @@ def test_compare_smoothings_subset(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
-@needs_hand
-def test_compare_all_smoothings(tmp_path: Path) -> None:
+def test_compare_all_smoothings(hand: Path, tmp_path: Path) -> None:
     out = tmp_path / "cmp"
-    assert main(["compare-smoothings", str(HAND), "-k", "3", "--quiet", *FAST, "--out", str(out)]) == 0
+    assert main(["compare-smoothings", str(hand), "-k", "3", "--quiet", *FAST, "--out", str(out)]) == 0
     rows = json.loads((out / "summary.json").read_text())["results"]
     assert [r["smoothing"] for r in rows] == [f"f{i}" for i in range(10)]
     best = min(r["objective"] for r in rows if "objective" in r)
@@ -255,10 +259,9 @@ def test_bad_k(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     _one_error_line(capsys.readouterr().err)
 
 
-@needs_hand
-def test_subprocess_module(tmp_path: Path) -> None:
+def test_subprocess_module(hand: Path, tmp_path: Path) -> None:
     out = tmp_path / "sub"
-    cmd = [sys.executable, "-m", "stiefel_cmm.cli.main", "modes", str(HAND), "-k", "3", "--no-png", "--json", *FAST,
+    cmd = [sys.executable, "-m", "stiefel_cmm.cli.main", "modes", str(hand), "-k", "3", "--no-png", "--json", *FAST,
            "--out", str(out)]
     proc = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr

@@ -62,9 +62,13 @@ def test_context_falls_back_to_the_shipped_stand_in():
 
 
 @pytest.mark.slow  # ~45 s: a benchmark's report (python -m bench thesis --quick); the parts have fast tests here
-def test_quick_report_runs_every_chapter(tmp_path):
+def test_quick_report_runs_every_chapter(tmp_path, monkeypatch):
     """``python -m bench thesis --quick``: every chapter module measures its claims (no error row), every claim
-    has a verdict and a setting, and every figure the report links exists."""
+    has a verdict and a setting, and every figure the report links exists. On the generated stand-ins
+    (``Context.mesh``), as from a fresh clone: ``../shared/meshes`` is hidden even where it exists."""
+    import bench.meshes
+
+    monkeypatch.setattr(bench.meshes, "SHARED", tmp_path / "no_shared_meshes")
     out = tmp_path / "THESIS.md"
     rc = report.main(["--quick", "--out", str(out)])
     text = out.read_text()
