@@ -86,6 +86,7 @@ def test_vmap_over_starts_and_smoothings(lap):
     assert abs(mixed.value[0] - mixed.value[1]) > 1e-6 * abs(mixed.value[0])
 
 
+@pytest.mark.slow
 def test_expand_dims_callback_matches_sequential(lap):
     """The host-factorisation preconditioner batched as one host call (``expand_dims``) gives the same
     batch as one call per member, and both the same as the CHOLMOD custom call."""

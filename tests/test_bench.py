@@ -135,6 +135,7 @@ def test_reliability_keeps_the_hand_written_part_of_its_page():
     assert reliability.page(None, generated).startswith("# Reliability: bad input")
 
 
+@pytest.mark.slow
 def test_tiny_suite_writes_consistent_results(tmp_path):
     out_json, out_md = tmp_path / "suite.json", tmp_path / "suite.md"
     methods = ["block-cg-cholesky", "block-bb-cholesky", "block-default-finish", "admm", "fast", "penalty", "eigsh",

@@ -70,7 +70,7 @@ def test_padded_rows_stay_exactly_zero():
     assert np.allclose(np.asarray(F.weights)[: padded.n], 1.0 / padded.n) and np.all(F.weights[padded.n:] == 0)
 
 
-@pytest.mark.parametrize("weighting", ["area", "uniform"])
+@pytest.mark.parametrize("weighting", ["area", pytest.param("uniform", marks=pytest.mark.slow)])
 def test_padded_solve_matches_exact_shapes(weighting):
     W, _ = _grid(12)
     a = np.linspace(0.5, 1.5, W.shape[0]) / W.shape[0]

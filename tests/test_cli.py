@@ -390,6 +390,7 @@ def test_quiet_prints_no_progress(tmp_path: Path, capsys: pytest.CaptureFixture)
     assert captured.out == "" and captured.err == ""
 
 
+@pytest.mark.slow
 def test_a_corrupt_cache_never_crashes_a_run(tmp_path: Path) -> None:
     """Every file of the cache (XLA executables and stored programs) overwritten with garbage: the next
     process compiles again and gives the same modes."""

@@ -111,6 +111,7 @@ def test_bad_options_are_named_before_any_work(tmp_path: Path, capsys: pytest.Ca
         assert not (tmp_path / name / "summary.json").exists()
 
 
+@pytest.mark.slow
 def test_smoothing_aliases_in_compare_and_grid(tmp_path: Path) -> None:
     out = tmp_path / "cmp"
     assert main(["compare-smoothings", SMALL, "-k", "2", "--smoothings", "huber,logcosh,f6", "--out", str(out),

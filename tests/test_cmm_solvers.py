@@ -16,7 +16,7 @@ import pytest
 import mesh
 import objectives
 from stiefel_cmm.cli.demo_mesh import demo_mesh
-from objectives import cmm
+from objectives.cmm import modes as cmm
 from objectives.cmm.modes import METHODS, compressed_modes, select_mu
 from objectives.cmm.solvers import (SOLVERS, ADMMCMM, BlockCMM, CMMSolver, FastCMM, SequentialADMMCMM, SequentialCMM,
                                     SolverOptionError)

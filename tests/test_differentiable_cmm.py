@@ -45,7 +45,7 @@ def _loss(hand, mu, w_scale5, eps, V):
 
 def test_cmm_derivatives_against_resolved_fd(hand):
     V0, F, Xs, P, c, n = hand
-    base = (0.05 * n, 1.0, 0.5, V0)
+    base = (jnp.asarray(0.05 * n), jnp.asarray(1.0), jnp.asarray(0.5), V0)  # arrays: one program for every value
     dV = jnp.asarray(np.random.default_rng(1).standard_normal(V0.shape)) * 1e-2
     grads = jax.grad(lambda mu, w5, eps, V: _loss(hand, mu, w5, eps, V), argnums=(0, 1, 2, 3))(*base)
     steps = {0: 2e-3, 1: 1e-4, 2: 1e-4, 3: 1e-4}  # FD truncation: h = 0.04 in μ was 3e-5 off
@@ -61,7 +61,7 @@ def test_cmm_derivatives_against_resolved_fd(hand):
         # measured on the stand-in: 8e-8 (μ), 2.6e-6 (w_5), 7e-8 (ε), 1.7e-9 (V) relative
         assert abs(analytic - fd) <= 1e-5 * abs(fd), (i, analytic, fd)
     # forward mode agrees with reverse mode (μ direction and shape direction together; measured 7e-11 relative)
-    tangent = jax.jvp(lambda s: _loss(hand, base[0] + s, 1.0, 0.5, V0 + s * dV), (0.0,), (1.0,))[1]
+    tangent = jax.jvp(lambda s: _loss(hand, base[0] + s, base[1], base[2], V0 + s * dV), (jnp.zeros(()),), (jnp.ones(()),))[1]
     assert abs(float(tangent) - (float(grads[0]) + float(jnp.sum(grads[3] * dV)))) <= 1e-8 * abs(float(tangent))
 
 

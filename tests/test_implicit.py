@@ -138,22 +138,23 @@ def test_noninvariant_derivative_against_resolved_fd():
         mu, w = theta
         return jnp.sum((X * (W @ X)) @ d) + mu * jnp.sum(w[:, None] * X ** 4)
 
-    X_start = stiefel.minimize(F, S, S.random_point(jax.random.PRNGKey(3)), args=(0.5, jnp.ones(N)),
+    X_start = stiefel.minimize(F, S, S.random_point(jax.random.PRNGKey(3)), args=(jnp.asarray(0.5), jnp.ones(N)),
                                method="lbfgs", gtol=1e-12, max_iters=5000).x
 
     def loss(theta):
         res = stiefel.minimize(F, S, X_start, args=theta, method="lbfgs", gtol=1e-12, max_iters=5000, check=False)
         return jnp.sum(c * res.x)
 
-    theta = (0.5, jnp.ones(N))
+    # θ as arrays throughout: a Python float in args is static, and every new value would compile anew
+    theta = (jnp.asarray(0.5), jnp.ones(N))
     g_mu, g_w = jax.grad(loss)(theta)
     h = 1e-6
-    fd_mu = (loss((0.5 + h, theta[1])) - loss((0.5 - h, theta[1]))) / (2 * h)
+    fd_mu = (loss((theta[0] + h, theta[1])) - loss((theta[0] - h, theta[1]))) / (2 * h)
     e3 = jnp.zeros(N).at[3].set(1.0)
-    fd_w3 = (loss((0.5, theta[1] + h * e3)) - loss((0.5, theta[1] - h * e3))) / (2 * h)
+    fd_w3 = (loss((theta[0], theta[1] + h * e3)) - loss((theta[0], theta[1] - h * e3))) / (2 * h)
     assert abs(float(g_mu) - float(fd_mu)) <= 1e-5 * abs(float(fd_mu))
     assert abs(float(g_w[3]) - float(fd_w3)) <= 1e-5 * abs(float(fd_w3))
-    jvp_mu = jax.jvp(lambda m: loss((m, theta[1])), (0.5,), (1.0,))[1]
+    jvp_mu = jax.jvp(lambda m: loss((m, theta[1])), (theta[0],), (jnp.ones(()),))[1]
     assert abs(float(jvp_mu) - float(g_mu)) <= 1e-8 * abs(float(g_mu))
 
 

@@ -69,7 +69,13 @@ def test_there_are_notebooks():
     assert NOTEBOOKS, f"no notebooks in {NBDIR}"
 
 
-@pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.name for p in NOTEBOOKS])
+# the quick start runs in the default run; the others (20–35 s each, every one compiling its own solvers) in the
+# slow run, which CI runs too
+QUICK = "01_quickstart.ipynb"
+
+
+@pytest.mark.parametrize("path", [pytest.param(p, id=p.name, marks=[] if p.name == QUICK else [pytest.mark.slow])
+                                  for p in NOTEBOOKS])
 def test_notebook_executes(path, kernel_env, tmp_path):
     nb = nbformat.read(path, as_version=4)
     cwd = tmp_path / "elsewhere"

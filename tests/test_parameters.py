@@ -283,6 +283,7 @@ def test_minimize_budget_is_a_runtime_limit():
     np.testing.assert_allclose(part.history.value[:8], full.history.value[:8], rtol=1e-12)
 
 
+@pytest.mark.slow
 def test_minimize_sequential_max_iters_is_total_over_columns():
     """The k = 3 columns share the total fairly: column j may use ⌈left/(k − j)⌉, what it leaves rolls over."""
     f = lambda x: jnp.dot(x, jnp.asarray(W_DENSE) @ x)  # noqa: E731

@@ -64,9 +64,12 @@ def test_python_blocks_are_found() -> None:
     assert fenced_blocks("```bash\nls\n```\n", "bash") == ["ls\n"]
 
 
-def test_readme_python_examples_run(tmp_path: Path) -> None:
+# the README's examples in the default run; the tutorial's (longer: six more programs to compile) in the slow one
+@pytest.mark.parametrize("path", [pytest.param(p, marks=[] if p == README else [pytest.mark.slow],
+                                               id=p.relative_to(ROOT).as_posix()) for p in EXAMPLE_FILES])
+def test_readme_python_examples_run(path: Path, tmp_path: Path) -> None:
     blocks = []
-    for path in EXAMPLE_FILES:
+    for path in [path]:
         found = python_blocks(path.read_text(encoding="utf-8"))
         rel = path.relative_to(ROOT).as_posix()
         assert len(found) >= (2 if path == README else 5), f"the examples of {rel} were not found"
