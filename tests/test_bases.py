@@ -1,14 +1,13 @@
 """GLMHs, LMHs, Hamiltonian eigenfunctions (objectives.bases) and basis evaluation (objectives.evaluation).
 
 Thesis §3.1, §3.3 (Thm. 3.3.7), §4.2, §4.6; docs/maths.md §4, §8. Dense n × n matrices appear
-here only as references on the 642-vertex knight stand-in (tests/example_meshes.py: the starfish
+here only as references on the 642-vertex knight stand-in (tests/mesh_fixtures.py: the starfish
 example at size 0; it replaced decimated-knight.off, 502 vertices).
 """
 
 from __future__ import annotations
 
 import functools
-import warnings
 
 import numpy as np
 import pytest
@@ -20,7 +19,7 @@ import scipy.sparse as sp
 import mesh
 from objectives import bases
 from objectives import evaluation as ev
-from example_meshes import hand_mesh, knight_laplacian, knight_mesh
+from mesh_fixtures import hand_mesh, knight_laplacian, knight_mesh
 
 
 @functools.lru_cache(maxsize=None)

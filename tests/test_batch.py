@@ -9,14 +9,14 @@ import stiefel
 from objectives.cmm.batch import cmm_batch, cmm_problem, default_options
 from objectives.energy.energies import cmm_energy
 
-from example_meshes import hand_laplacian
+from mesh_fixtures import hand_laplacian
 
 K = 4
 
 
 @pytest.fixture(scope="module")
 def lap():
-    """The hand stand-in (tests/example_meshes.py: starfish, 642 vertices; it replaced hand_868.obj)."""
+    """The hand stand-in (tests/mesh_fixtures.py: starfish, 642 vertices; it replaced hand_868.obj)."""
     return hand_laplacian()
 
 

@@ -23,7 +23,7 @@ from stiefel_cmm.cli.demo_mesh import demo_mesh
 from stiefel_cmm.cli.main import main
 from stiefel_cmm.cli.outputs import parse_mu
 
-from example_meshes import hand_mesh, write_obj
+from mesh_fixtures import hand_mesh, write_mesh
 
 #: the block solver's stopping at gtol = 1e-6 is not bit-reproducible run to run (the same
 #: command converged in 413 iterations once and hit 5000 the next); tests use a looser
@@ -34,10 +34,10 @@ REPO = Path(__file__).resolve().parents[1]
 
 @pytest.fixture(scope="module")
 def hand(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A mesh file for the runs on a given path: the hand stand-in of tests/example_meshes.py (the starfish
+    """A mesh file for the runs on a given path: the hand stand-in of tests/mesh_fixtures.py (the starfish
     example at size 0, 642 vertices; it replaced hand_868.obj) written as an OBJ file."""
     m = hand_mesh()
-    return write_obj(tmp_path_factory.mktemp("meshes") / "starfish_642.obj", m.vertices, m.faces)
+    return write_mesh(tmp_path_factory.mktemp("meshes") / "starfish_642.obj", m.vertices, m.faces)
 
 
 def _a_orthonormality(modes: np.ndarray, source) -> float:

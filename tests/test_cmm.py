@@ -9,9 +9,9 @@ from objectives.admm.splitting import ADMMOptions, admm
 from objectives.cmm.modes import compressed_modes, first_eigenpairs
 from objectives.cmm.solvers import ADMMCMM, BlockCMM, FastCMM, SequentialCMM, SolverOptionError
 
-from example_meshes import hand_laplacian, hand_mesh, knight_laplacian, knight_mesh
+from mesh_fixtures import hand_laplacian, hand_mesh, knight_laplacian, knight_mesh
 
-# A generated mesh (tests/example_meshes.py): the starfish example at size 0 (642 vertices, closed, five
+# A generated mesh (tests/mesh_fixtures.py): the starfish example at size 0 (642 vertices, closed, five
 # arms of different lengths). It replaced both hand_868.obj ("hand") and decimated-knight.off (502
 # vertices, "knight"); the two fixtures keep the names of the tests' original meshes.
 #

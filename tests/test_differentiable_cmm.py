@@ -12,14 +12,14 @@ import stiefel
 from objectives.cmm.modes import first_eigenpairs
 from objectives.cmm.differentiable import cmm_solve
 
-from example_meshes import hand_laplacian, hand_mesh
+from mesh_fixtures import hand_laplacian, hand_mesh
 
 K = 3
 
 
 @pytest.fixture(scope="module")
 def hand():
-    """The hand stand-in (tests/example_meshes.py: starfish, 642 vertices; it replaced hand_868.obj)."""
+    """The hand stand-in (tests/mesh_fixtures.py: starfish, 642 vertices; it replaced hand_868.obj)."""
     m = hand_mesh()
     V0, F = jnp.asarray(m.vertices), np.asarray(m.faces)
     lap = hand_laplacian()

@@ -2,7 +2,7 @@
 
 Pairs: the knight and a vertex-permuted copy (an exact discrete isometry, Def. 3.4.8)
 and the knight and a noisy copy (same connectivity, not isometric). The "knight" is the generated
-stand-in of tests/example_meshes.py (the starfish example at size 0, 642 vertices), which replaced
+stand-in of tests/mesh_fixtures.py (the starfish example at size 0, 642 vertices), which replaced
 decimated-knight.off (502 vertices).
 Convention: ``C`` is ``(k_tgt, k_src)``, ``b ≈ C a`` (the thesis's ``Cᵀ``).
 """
@@ -18,7 +18,7 @@ import trimesh
 import mesh
 from objectives import fmaps
 from objectives.evaluation import RankDeficientWarning
-from example_meshes import knight_mesh
+from mesh_fixtures import knight_mesh
 
 K = 12
 

@@ -7,7 +7,7 @@ import pytest
 from objectives.admm.splitting import l1_weights_np
 from objectives.cmm.batch import cmm_batch, default_options
 
-from example_meshes import hand_laplacian
+from mesh_fixtures import hand_laplacian
 
 K = 4
 EPS32 = float(np.finfo(np.float32).eps)  # 1.2e-7
@@ -15,7 +15,7 @@ EPS32 = float(np.finfo(np.float32).eps)  # 1.2e-7
 
 @pytest.fixture(scope="module")
 def lap():
-    """The hand stand-in (tests/example_meshes.py: starfish, 642 vertices; it replaced hand_868.obj)."""
+    """The hand stand-in (tests/mesh_fixtures.py: starfish, 642 vertices; it replaced hand_868.obj)."""
     return hand_laplacian()
 
 

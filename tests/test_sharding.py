@@ -17,7 +17,7 @@ import pytest
 import stiefel
 from stiefel.solvers.sharding import shard_rows, solve_sharded
 
-from example_meshes import torus_arrays, write_obj
+from mesh_fixtures import surface_arrays, write_mesh
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -70,9 +70,9 @@ CHILD = textwrap.dedent(
 
 @pytest.fixture(scope="module")
 def child_report(tmp_path_factory):
-    # a generated bumpy torus of 36 × 24 = 864 vertices (tests/example_meshes.py; it replaced hand_868.obj,
+    # the generated genus-1 torus of 48 × 18 = 864 vertices (tests/mesh_fixtures.py; it replaced hand_868.obj,
     # 868 = 4 · 217): the rows must split evenly over the 4 devices, which the 642-vertex stand-ins do not
-    path = write_obj(tmp_path_factory.mktemp("sharding") / "torus_864.obj", *torus_arrays(36, 24))
+    path = write_mesh(tmp_path_factory.mktemp("sharding") / "torus_864.obj", *surface_arrays("torus"))
     env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4", JAX_PLATFORMS="cpu",
                PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
     proc = subprocess.run([sys.executable, "-c", CHILD, str(path)], env=env, cwd=ROOT, capture_output=True,
