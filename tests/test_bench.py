@@ -283,6 +283,11 @@ def test_scaling_modes_merge_keeps_other_rows(tmp_path, monkeypatch):
         stdout = json.dumps(dict(old_row, level=1, n=100, seconds=1.0))
 
     monkeypatch.setattr(scaling_modes.subprocess, "run", lambda *a, **k: Done())
+    # the input check finds a stand-in file (the level's subprocess, replaced above, would read it): no ../shared
+    shared = tmp_path / "meshes"
+    shared.mkdir()
+    (shared / "bunny.off").write_text("OFF\n")
+    monkeypatch.setattr(meshes, "SHARED", shared)
     assert scaling_modes.main(["--base", "bunny.off", "--levels", "1", "--merge", "--out-json", str(out_json),
                                "--out-md", str(out_md)]) == 0
     rows = json.loads(out_json.read_text())["rows"]
