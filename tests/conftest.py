@@ -56,10 +56,10 @@ def _release_compiled_programs():
 
 # The heaviest modules first (longest-first packing onto the xdist workers, pyproject.toml: with whole
 # modules per worker, a heavy module collected last would leave the other worker idle at the end).
-_HEAVY_FIRST = ["test_notebooks.py", "test_implicit.py", "test_cmm.py", "test_readme.py", "test_cmm_solvers.py",
-                "test_cli.py", "test_parameters.py", "test_trust_region.py", "test_geodesics.py",
-                "test_differentiable_cmm.py", "test_block_solver.py", "test_cli_options.py", "test_optx_solvers.py",
-                "test_precision.py"]
+_HEAVY_FIRST = ["test_block_solver.py", "test_cmm.py", "test_sequential_solver.py", "test_readme.py", "test_implicit.py",
+                "test_cli.py", "test_smoothings.py", "test_geodesics.py", "test_objectives_energy.py",
+                "test_retractions.py", "test_trust_region.py", "test_grassmann.py", "test_saddle.py",
+                "test_operators.py"]
 
 
 def pytest_collection_modifyitems(config, items):

@@ -14,6 +14,9 @@ from pathlib import Path
 
 import pytest
 
+# the whole API reference is built (~20 s): in the slow suite, which CI runs too
+pytestmark = pytest.mark.slow
+
 ROOT = Path(__file__).resolve().parents[1]
 _spec = importlib.util.spec_from_file_location("build_api", ROOT / "docs" / "build_api.py")
 assert _spec and _spec.loader

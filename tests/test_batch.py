@@ -29,6 +29,7 @@ def _assert_same(a, b, *, x_tol=1e-8):
     np.testing.assert_allclose(a.objective, b.objective, rtol=1e-10)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("preconditioner", ["shifted", None])
 def test_vmap_over_mu_equals_loop(lap, preconditioner):
     """A fixed iteration budget, so both runs take the same steps: the vmapped batch of three μ
@@ -47,6 +48,7 @@ def test_vmap_over_mu_equals_loop(lap, preconditioner):
     assert np.max(np.abs(batched.modes[0] - batched.modes[2])) > 1e-3
 
 
+@pytest.mark.slow
 def test_loop_member_equals_stiefel_minimize(lap):
     """The loop's single solver is the block solver of ``stiefel.minimize`` (same energy, start,
     preconditioner and options)."""
@@ -99,6 +101,7 @@ def test_expand_dims_callback_matches_sequential(lap):
     _assert_same(seq, cmm_batch(lap, K, mus, **kw))
 
 
+@pytest.mark.slow
 def test_auto_mode_is_the_loop_on_cpu_and_vmap_elsewhere(lap, monkeypatch):
     """``mode="auto"`` (the default) runs the loop on a CPU backend (measured faster there) and says so."""
     opts = default_options(max_iters=3, gtol=1e-12, ftol=0.0)

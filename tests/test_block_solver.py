@@ -25,8 +25,13 @@ def problem():
     return W, M, F, float(np.sum(vals))
 
 
-@pytest.mark.parametrize("method", ["cg", "bb", "lbfgs"])
-@pytest.mark.parametrize("retraction", ["cayley", "cholesky", "polar"])
+def _grid(rows, methods, default):
+    """Every (row, method) pair; those not in ``default`` (which covers each row and method once) in the slow run."""
+    return [pytest.param(r, m, marks=() if (r, m) in default else pytest.mark.slow) for r in rows for m in methods]
+
+
+@pytest.mark.parametrize("retraction, method", _grid(["cayley", "cholesky", "polar"], ["cg", "bb", "lbfgs"],
+                                                      {("cayley", "cg"), ("cholesky", "lbfgs"), ("polar", "bb")}))
 def test_trace_minimisation_preconditioned(problem, method, retraction):
     W, M, F, target = problem
     S = GeneralizedStiefel(M, K, retraction=retraction)
@@ -38,8 +43,8 @@ def test_trace_minimisation_preconditioned(problem, method, retraction):
     assert int(res.iterations) < 150
 
 
-@pytest.mark.parametrize("method", ["cg", "bb", "lbfgs"])
-@pytest.mark.parametrize("metric", ["euclidean", "canonical"])
+@pytest.mark.parametrize("metric, method", _grid(["euclidean", "canonical"], ["cg", "bb", "lbfgs"],
+                                                  {("euclidean", "cg"), ("canonical", "lbfgs"), ("euclidean", "bb")}))
 def test_trace_minimisation_plain(problem, method, metric):
     W, M, F, target = problem
     S = GeneralizedStiefel(M, K, metric=metric, retraction="cholesky")
@@ -98,6 +103,7 @@ def test_bad_start_and_options(problem):
     assert int(res.status) in (Status.MAX_ITERS, Status.CONVERGED)
 
 
+@pytest.mark.slow
 def test_pure_solver_vmaps_over_starts(problem):
     """stiefel.solve_block is pure: jax.vmap over three starts equals three separate solves."""
     from stiefel import BlockOptions, solve_block
@@ -121,6 +127,7 @@ def test_pure_solver_vmaps_over_starts(problem):
     assert np.all(np.asarray(batched.status) == Status.CONVERGED)
 
 
+@pytest.mark.slow
 def test_ftol_stops_a_stalled_solve(problem):
     """With ftol, a solve whose gradient tolerance is unreachable stops as converged once the
     objective stops decreasing, long before max_iters; without it, it runs to max_iters."""
@@ -153,6 +160,7 @@ def test_ftol_window_sets_the_stall_test_span(problem):
         minimize(F, S, X0, ftol=1e-3, ftol_window=0, preconditioner=P)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("preconditioned", [False, True])
 def test_lbfgs_needs_fewer_evaluations_than_cg(problem, preconditioned):
     """L-BFGS (two-loop, memory 8) reaches the same minimum as CG with fewer objective evaluations

@@ -70,6 +70,7 @@ def test_padded_rows_stay_exactly_zero():
     assert np.allclose(np.asarray(F.weights)[: padded.n], 1.0 / padded.n) and np.all(F.weights[padded.n:] == 0)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("weighting", ["area", pytest.param("uniform", marks=pytest.mark.slow)])
 def test_padded_solve_matches_exact_shapes(weighting):
     W, _ = _grid(12)
@@ -112,6 +113,7 @@ _SAME_BUCKET = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow
 def test_meshes_of_one_bucket_share_the_compiled_solver(tmp_path):
     """A 400-vertex problem compiles; a 441-vertex one (same bucket) in a new process loads both solver
     programs (stored, not traced again: ``stiefel.runtime.program_cache``) and their executables from the

@@ -28,6 +28,7 @@ def cmm():
     return W, a, S, X
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("weighting", ["area", "uniform"])
 def test_every_cmm_energy_passes_gradient_and_hessian_checks(cmm, weighting):
     W, a, S, X = cmm
@@ -54,6 +55,7 @@ def test_dirichlet_and_brockett_with_args(cmm):
     assert stiefel.check_hessian(brockett, polar, X, args=d, curve="retraction").passed
 
 
+@pytest.mark.slow
 def test_wrong_derivatives_fail(cmm):
     W, a, S, X = cmm
     Wop = stiefel.as_operator(W, check=False, factor=False)
@@ -96,6 +98,7 @@ def test_nondifferentiable_and_nonfinite_objectives_are_reported(cmm):
 
 @pytest.mark.parametrize("kind", ["diagonal", pytest.param("dense", marks=pytest.mark.slow),
                                   pytest.param("sparse", marks=pytest.mark.slow)])
+@pytest.mark.slow
 def test_every_retraction(kind):
     """Cayley and Cholesky-QR are first order (slope 2), polar and radial (M-projections) second order
     (slope 3), periodic is the geodesic itself (exact)."""

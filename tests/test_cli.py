@@ -148,6 +148,7 @@ def test_modes_finish_records_exact_sparsity(tmp_path: Path) -> None:
     assert diag["support_sizes"] == [int(c) for c in (modes != 0).sum(axis=0)] and diag["l1_residual"] < 1e-8
 
 
+@pytest.mark.slow
 def test_modes_hand_json_quiet(hand: Path, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     out = tmp_path / "hand"
     assert main(["modes", str(hand), "-k", "3", "--mu", "5.2", "--weighting", "uniform", "--seed", "1",
@@ -174,6 +175,7 @@ def test_modes_hand_json_quiet(hand: Path, tmp_path: Path, capsys: pytest.Captur
     _check_png(tmp_path / "eigs" / "eigs.png")
 
 
+@pytest.mark.slow
 def test_compare_smoothings_subset(hand: Path, tmp_path: Path) -> None:
     out = tmp_path / "cmp"
     assert main(["compare-smoothings", str(hand), "-k", "3", "--smoothings", "f3,f6", "--quiet", *FAST,
@@ -259,6 +261,7 @@ def test_bad_k(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     _one_error_line(capsys.readouterr().err)
 
 
+@pytest.mark.slow
 def test_subprocess_module(hand: Path, tmp_path: Path) -> None:
     out = tmp_path / "sub"
     cmd = [sys.executable, "-m", "stiefel_cmm.cli.main", "modes", str(hand), "-k", "3", "--no-png", "--json", *FAST,
@@ -333,6 +336,7 @@ def test_compilation_cache_options(tmp_path: Path, capsys: pytest.CaptureFixture
     assert not jax.config.jax_compilation_cache_dir  # --no-cache turns off what an earlier run turned on
 
 
+@pytest.mark.slow
 def test_stored_programs_are_counted_in_the_summary(tmp_path: Path) -> None:
     """A second run with the same cache loads the solver programs instead of tracing them."""
     from stiefel import program_cache
@@ -411,6 +415,7 @@ def test_a_corrupt_cache_never_crashes_a_run(tmp_path: Path) -> None:
     assert np.array_equal(results[0], results[1])
 
 
+@pytest.mark.slow
 def test_ascii_ply_on_request(tmp_path: Path) -> None:
     out = tmp_path / "ascii"
     assert main(["modes", "-k", "2", "--quiet", "--no-png", "--max-iters", "30", "--ascii-ply", "--out", str(out)]) == 0

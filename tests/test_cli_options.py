@@ -38,6 +38,7 @@ def test_parse_mu_units() -> None:
         parse_mu("2mu")
 
 
+@pytest.mark.slow
 def test_options_reach_the_solver_and_the_summary(tmp_path: Path) -> None:
     out = tmp_path / "o"
     argv = ["modes", SMALL, "-k", "3", "--smoothing", "logcosh", "--eps", "0.01", "--delta", "0.02",
@@ -59,6 +60,7 @@ def test_options_reach_the_solver_and_the_summary(tmp_path: Path) -> None:
     assert params["mu"]["eigenvalue"] == pytest.approx(lam[-1], rel=1e-6)
 
 
+@pytest.mark.slow
 def test_start_file_round_trip_and_bad_shapes(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     first = tmp_path / "first"
     assert main(["modes", SMALL, "-k", "3", "--out", str(first), *FAST]) == 0
@@ -124,6 +126,7 @@ def test_smoothing_aliases_in_compare_and_grid(tmp_path: Path) -> None:
     assert (out / "comparison.png").is_file()
 
 
+@pytest.mark.slow
 def test_target_sparsity(tmp_path: Path) -> None:
     out = tmp_path / "t"
     assert main(["modes", "example:bumpy", "-k", "2", "--target-sparsity", "0.5", "--out", str(out), *FAST]) == 0

@@ -64,7 +64,7 @@ def test_cross_method_agreement_on_hand(hand, hand_block):
     assert res.sparsity["1e-3"] > 0.05
 
 
-@pytest.mark.parametrize("solver", [BlockCMM, SequentialCMM])
+@pytest.mark.parametrize("solver", [BlockCMM, pytest.param(SequentialCMM, marks=pytest.mark.slow)])
 def test_mu_zero_gives_eigenfunctions(knight, solver):
     """μ = 0: the modes span the first k Laplacian eigenfunctions (subspace angle ≤ 1e-6)."""
     k = 5
@@ -86,6 +86,7 @@ def test_admm_mu_zero_gives_eigenfunctions(knight):
     assert np.arccos(np.clip(cos.min(), -1, 1)) <= 1e-3
 
 
+@pytest.mark.slow
 def test_isometry_permuted_mesh_gives_permuted_modes(knight):
     """Prop. 3.5.4: on a vertex-permuted mesh, from the permuted start, the CMMs are the permuted CMMs."""
     m = knight_mesh()
@@ -317,6 +318,7 @@ def test_active_set_preconditioner_matches_its_dense_definition(hand):
     np.testing.assert_allclose(pc(Y), fresh(Y), rtol=1e-12, atol=1e-15)
 
 
+@pytest.mark.slow
 def test_active_set_block_solver_agrees_with_shifted(hand, hand_block):
     """Both preconditioners reach the same CMM objective (within 1e-3) on the hand stand-in, k = 6, μ = 0.02n
     (measured: 9e-9 apart, 106 iterations)."""
@@ -331,7 +333,7 @@ def test_active_set_block_solver_agrees_with_shifted(hand, hand_block):
     assert np.all(np.diff(h["time"]) >= 0)
 
 
-@pytest.mark.parametrize("preconditioner", ["shifted", "active_set"])
+@pytest.mark.parametrize("preconditioner", ["shifted", pytest.param("active_set", marks=pytest.mark.slow)])
 def test_lbfgs_block_solver_agrees_with_cg(hand, hand_block, preconditioner):
     """optimizer="lbfgs" reaches CG's CMM objective (within 1e-3) on the hand stand-in, k = 6, μ = 0.02n
     (measured: 2e-8 and 7e-9 apart, 100 and 109 iterations)."""
@@ -357,6 +359,7 @@ def test_soft_threshold_is_the_l1_prox():
     np.testing.assert_array_equal(soft_threshold(V, np.array([[0.5], [0.2]])), [[0.5, -1.5], [0.0, 0.0]])
 
 
+@pytest.mark.slow
 def test_precomputed_eigenpairs_give_the_same_solve(knight):
     """``eigenpairs=`` replaces the eigensolve (same start and shift, so the same modes); bad pairs are
     refused before any work."""

@@ -63,6 +63,7 @@ def test_curvature_preconditioner_is_symmetric_positive_definite(problem):
     assert float(jnp.sum(Y * P(Y))) > 0 and float(jnp.sum(Z * P(Z))) > 0
 
 
+@pytest.mark.slow
 def test_point_preconditioner_that_ignores_the_point_changes_nothing():
     """A PointPreconditioner returning PY gives the plain preconditioner's iterates (CG and trust regions)."""
     rng = np.random.default_rng(3)
@@ -84,6 +85,7 @@ def test_point_preconditioner_that_ignores_the_point_changes_nothing():
         np.testing.assert_allclose(np.asarray(a_sol.value), np.asarray(b_sol.value), atol=1e-12)
 
 
+@pytest.mark.slow
 def test_curvature_preconditioner_cuts_hessian_products(problem, plain):
     """From the block solver's answer the point preconditioner needs far fewer Hessian products than K⁻¹
     (measured: 651 vs 1944 to the same minimum on one CPU, 684 vs 1180 on another with AVX-512: the shifted
@@ -106,6 +108,7 @@ def test_curvature_preconditioner_cuts_hessian_products(problem, plain):
     assert int(runs["curvature"]["n_hvps"]) < 0.7 * int(runs["shifted"]["n_hvps"])
 
 
+@pytest.mark.slow
 def test_block_cmm_polish_reaches_the_gradient_target(problem, plain):
     W, a, pairs, mu, sigma = problem
     polished = compressed_modes((W, a), K, mu, solver=BlockCMM(polish="tr"), eigenpairs=pairs)

@@ -19,6 +19,7 @@ def problem():
     return W, a, pairs, 2.0 * float(pairs[0][-1])
 
 
+@pytest.mark.slow
 def test_saddle_check_escapes_the_plateau(problem):
     W, a, pairs, mu = problem
     plain = compressed_modes((W, a), K, mu, solver=BlockCMM(saddle_checks=0), eigenpairs=pairs)

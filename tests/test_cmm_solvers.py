@@ -151,6 +151,7 @@ def test_compressed_modes_checks_what_the_solver_takes(demo):
         compressed_modes(lap, K, 1.0, solver=FastCMM(U[:10]))
 
 
+@pytest.mark.slow
 def test_eigenpairs_are_computed_once_and_only_when_used(demo, monkeypatch):
     """The eigenbasis start and the default shift σ = λ_{k−1} share one eigensolve; ADMM with a random
     start, the fast method and a block solver with a given shift and a random start need none."""
@@ -193,6 +194,7 @@ REFERENCE = [  # solver, expected objective and iterations under the keyword API
 @pytest.mark.parametrize("make, objective, iterations", REFERENCE,
                          ids=["block", "block-lbfgs-active-set", "sequential", "admm", "admm-thesis",
                               "admm-sequential", "fast"])
+@pytest.mark.slow
 def test_each_solver_reproduces_the_keyword_api(demo, make, objective, iterations):
     lap, U = demo
     solver = make(U)
@@ -227,6 +229,7 @@ def test_select_mu_passes_the_solver_through(demo):
     assert isinstance(solver, CMMSolver)
 
 
+@pytest.mark.slow
 def test_runtime_smoothing_compiles_once_for_all_smoothings(demo):
     """``runtime_smoothing=True``: a second smoothing reuses the compiled solver (in this process: no new
     trace or compilation) and gives the same modes as that smoothing compiled on its own."""
@@ -243,6 +246,7 @@ def test_runtime_smoothing_compiles_once_for_all_smoothings(demo):
     np.testing.assert_allclose(second.modes, alone.modes, atol=1e-8)
 
 
+@pytest.mark.slow
 def test_cmm_result_prints_one_line(demo):
     lap, _ = demo
     r = compressed_modes(lap, 3, 0.01 * lap.n, solver=BlockCMM(max_iters=50))

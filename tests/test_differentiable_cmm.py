@@ -43,6 +43,7 @@ def _loss(hand, mu, w_scale5, eps, V):
     return jnp.sum(c * Psi)
 
 
+@pytest.mark.slow
 def test_cmm_derivatives_against_resolved_fd(hand):
     V0, F, Xs, P, c, n = hand
     base = (jnp.asarray(0.05 * n), jnp.asarray(1.0), jnp.asarray(0.5), V0)  # arrays: one program for every value

@@ -32,6 +32,7 @@ def problem():
     return W, M, (lambda X: jnp.sum(X * Wop.mv(X))), S, X0
 
 
+@pytest.mark.slow
 def test_chunked_iterates_equal_one_loop(problem):
     """``minimize`` (host loop over chunks, tiny chunks forced) and ``solve_block`` (optx.minimise, one
     while_loop) take the same iterations to the same point."""
@@ -53,6 +54,7 @@ def test_chunked_iterates_equal_one_loop(problem):
     assert float(S.dist_to_manifold(res.x)) <= 1e-12 and float(res.stats["dist_to_manifold"]) <= 1e-12
 
 
+@pytest.mark.slow
 def test_reports_are_rate_limited(problem):
     """With the default interval the reports come at most a few per second, whatever the iteration speed."""
     _, _, F, S, X0 = problem
@@ -123,6 +125,7 @@ def test_compiled_loop_has_no_host_callback(problem):
     assert "callback" not in text and "custom_linear_solve" in text
 
 
+@pytest.mark.slow
 def test_progress_and_stop_reach_the_block_cmm_stages():
     from objectives.cmm.modes import compressed_modes
     from objectives.cmm.solvers import BlockCMM
@@ -174,6 +177,7 @@ _CACHED = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow
 def test_persistent_cache_serves_the_solver_in_a_new_process(tmp_path):
     """Two fresh processes: the second one loads both solver programs (init and advance) from the cache —
     impossible while a sparse solve was a host callback."""
@@ -191,6 +195,7 @@ def test_persistent_cache_serves_the_solver_in_a_new_process(tmp_path):
     assert out[1][0] == "converged" and int(out[1][1]) >= 2
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["admm", "admm_sequential", "fast", "sequential"])
 def test_every_cmm_solver_reports_progress_and_stops(method):
     """Progress reaches every CMM solver (ADMM ones a few times per second, the sequential one per column,

@@ -25,6 +25,7 @@ def _setup(kind, k, metric, seed=0):
 
 @pytest.mark.parametrize("kind", ["diagonal", pytest.param("dense", marks=pytest.mark.slow),
                                   pytest.param("sparse", marks=pytest.mark.slow)])
+@pytest.mark.slow
 def test_euclidean_exp_solves_the_geodesic_equation(kind):
     """γ(t) = Exp_X(tξ): γ(0) = X, γ'(0) = ξ, γ stays on S_M, its acceleration is M-normal (P_γ(γ'') = 0,
     the geodesic equation of the M-weighted embedded metric), and its speed is constant."""
@@ -41,6 +42,7 @@ def test_euclidean_exp_solves_the_geodesic_equation(kind):
         assert abs(float(S.norm(Y, velocity(t))) - 1.0) <= 1e-12
 
 
+@pytest.mark.slow
 def test_canonical_exp_solves_the_canonical_geodesic_equation():
     """M = I: Y'' + Y'Y'ᵀY + Y((YᵀY')² + Y'ᵀY') = 0 (Edelman, Arias, Smith 1998, eq. 2.41)."""
     S = GeneralizedStiefel(None, 3, n=N, metric="canonical")
@@ -67,6 +69,7 @@ def test_exp_is_the_isometry_conjugate_of_the_stiefel_exp(metric):
     assert np.max(np.abs(np.asarray(S.exp(X, 2.0 * xi)) - expected)) <= 1e-12
 
 
+@pytest.mark.slow
 def test_ellipsoid_closed_form():
     """k = 1: Exp_x(tξ) = cos(t)x + sin(t)ξ for ‖ξ‖_M = 1 (a great ellipse), both metrics; dist beyond π
     wraps around: the shortest way to Exp_x(3.5ξ) has length 2π − 3.5."""
@@ -77,6 +80,7 @@ def test_ellipsoid_closed_form():
         assert abs(float(S.dist(x, S.exp(x, 3.5 * xi))) - (2 * np.pi - 3.5)) <= 1e-10
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", M_KINDS)
 @pytest.mark.parametrize("metric", ["euclidean", "canonical"])
 def test_log_inverts_exp(kind, metric):
@@ -92,6 +96,7 @@ def test_log_inverts_exp(kind, metric):
     assert float(jnp.max(jnp.abs(S.log(X, X)))) <= 1e-14
 
 
+@pytest.mark.slow
 def test_log_within_the_span_of_x():
     """Y = X·Q (Q orthogonal): the logarithm is vertical, XΩ, and Exp brings it back (rank-deficient Y⊥)."""
     S, X, _ = _setup("diagonal", 3, "euclidean", seed=6)
@@ -101,6 +106,7 @@ def test_log_within_the_span_of_x():
     assert float(jnp.max(jnp.abs(Z - X @ Omega))) <= 1e-10
 
 
+@pytest.mark.slow
 def test_log_outside_its_domain():
     S = GeneralizedStiefel(metric_matrix("diagonal", 6, seed=7), 1)
     x = S.random_point(jax.random.PRNGKey(7))

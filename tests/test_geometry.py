@@ -121,6 +121,7 @@ def test_sequential_constraint_set(kind):
 @settings(max_examples=4, deadline=None)  # 8 cost 18 s of the default run
 @given(n=st.integers(3, 14), data=st.data(), seed=st.integers(0, 2**16),
        kind=st.sampled_from(M_KINDS), metric=st.sampled_from(["euclidean", "canonical"]))
+@pytest.mark.slow
 def test_gradient_identity_over_shapes(n, data, seed, kind, metric):
     k = data.draw(st.integers(1, min(n, 4)))
     S = GeneralizedStiefel(metric_matrix(kind, n, seed=seed), k, metric=metric, retraction="polar")
@@ -179,6 +180,7 @@ def test_preconditioned_residual_is_descent_and_vanishes_at_critical_points(kind
     assert float(jnp.max(jnp.abs(preconditioned_residual(S, lambda Y: P @ Y, Xc, Rc)))) < 1e-10
 
 
+@pytest.mark.slow
 def test_ordinary_stiefel_manifold_from_none():
     """``GeneralizedStiefel(None, k)`` is ``XᵀX = I``: the same solve as an explicit identity metric; ``n``
     is optional and only what needs it asks for it."""

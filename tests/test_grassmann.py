@@ -25,6 +25,7 @@ def _setup(seed=0):
     return (A + A.T) / 2, M, G, X
 
 
+@pytest.mark.slow
 def test_geodesics_and_principal_angles():
     A, M, G, X = _setup()
     xi = G.random_tangent(jax.random.PRNGKey(5), X)
@@ -55,6 +56,7 @@ def test_log_outside_its_domain():
     assert abs(float(G.principal_angles(X, Y)[-1]) - np.pi / 2) <= 1e-7
 
 
+@pytest.mark.slow
 def test_checks_and_dimension():
     A, M, G, X = _setup(3)
     f = lambda Y: -jnp.trace(Y.T @ A @ Y)  # noqa: E731

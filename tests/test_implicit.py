@@ -65,6 +65,7 @@ def _solve_eig(W0, D, M, theta, *, X0=None, invariant=True, throw=True, max_iter
     return res, S
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["diagonal", pytest.param("dense", marks=pytest.mark.slow)])
 def test_invariant_eigen_derivative(kind):
     """d/dθ tr(XᵀBX) and d/dθ of the projector XXᵀM for the k lowest eigenvectors of (W0 + θD, M):
@@ -100,6 +101,7 @@ def test_invariant_eigen_derivative(kind):
         assert abs(value - analytic) <= 1e-5 * abs(analytic), (value, analytic)
 
 
+@pytest.mark.slow
 def test_derivative_with_respect_to_M():
     """M = diag(m(θ)) inside the differentiated function: the derivative of tr(XᵀBX) matches eigh FD."""
     W0, D, _ = _eig_problem("diagonal")
@@ -158,6 +160,7 @@ def test_noninvariant_derivative_against_resolved_fd():
     assert abs(float(jvp_mu) - float(g_mu)) <= 1e-8 * abs(float(g_mu))
 
 
+@pytest.mark.slow
 def test_optx_minimise_with_adjoint_is_differentiable():
     """The optimistix idiom: optx.minimise(..., adjoint=RiemannianImplicitAdjoint()) under jax.grad."""
     W0, D, M = _eig_problem("diagonal")
@@ -180,6 +183,7 @@ def test_optx_minimise_with_adjoint_is_differentiable():
     assert abs(g - via_minimize) <= 1e-7 * abs(g)
 
 
+@pytest.mark.slow
 def test_nonconverged_solve_gives_nan_or_raises():
     W0, D, M = _eig_problem("diagonal")
 
@@ -207,6 +211,7 @@ def test_sequential_solver_refuses_differentiation_by_name():
         jax.grad(value)(0.1)
 
 
+@pytest.mark.slow
 def test_closed_over_parameters_are_differentiated():
     """θ captured by the objective's closure (no args=) gets the same derivative as θ passed as args."""
     W0, D, M = _eig_problem("diagonal")

@@ -74,6 +74,7 @@ def test_backtracking_fallback_finds_armijo_step():
     assert 0 < float(r.step) < 1e-6
 
 
+@pytest.mark.slow
 def test_along_a_retraction_curve():
     """h(τ) = F(R_X(τd)) with h' by jvp: the accepted step satisfies strong Wolfe on the manifold."""
     S = GeneralizedStiefel(metric_matrix("diagonal", 10), 3, retraction="cayley")

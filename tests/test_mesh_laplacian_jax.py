@@ -83,6 +83,7 @@ def _probe(V, F, u, c):
     return jnp.stack(out)
 
 
+@pytest.mark.slow
 def test_derivatives_match_finite_differences():
     # torus with holes: boundary edges carry one cotangent, obtuse faces exercise "mixed"
     m = surface("torus_holes")

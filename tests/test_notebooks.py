@@ -76,6 +76,7 @@ QUICK = "01_quickstart.ipynb"
 
 @pytest.mark.parametrize("path", [pytest.param(p, id=p.name, marks=[] if p.name == QUICK else [pytest.mark.slow])
                                   for p in NOTEBOOKS])
+@pytest.mark.slow
 def test_notebook_executes(path, kernel_env, tmp_path):
     nb = nbformat.read(path, as_version=4)
     cwd = tmp_path / "elsewhere"

@@ -324,6 +324,7 @@ def test_cmm_line_matches_the_retraction_curve():
     assert F.line(stiefel.GeneralizedStiefel(a, k, retraction="polar"), X, eta) is None
 
 
+@pytest.mark.slow
 def test_runtime_smoothing_equals_each_static_smoothing():
     """``runtime_smoothing=True``: the smoothing is a runtime index (lax.switch); value and gradient equal
     those of the energy with that smoothing fixed, for all ten, and one jitted function serves them all."""

@@ -27,6 +27,7 @@ def brockett():
     return W, M, F, d, float(vals @ np.arange(K, 0, -1.0))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("cls,method", [(RiemannianCG, "cg"), (RiemannianLBFGS, "lbfgs"), (RiemannianBB, "bb")])
 def test_optx_path_equals_minimize(brockett, cls, method):
     W, M, F, d, target = brockett
@@ -45,6 +46,7 @@ def test_optx_path_equals_minimize(brockett, cls, method):
     assert float(S.dist_to_manifold(sol.value)) <= 1e-12
 
 
+@pytest.mark.slow
 def test_results_codes_and_throw(brockett):
     W, M, F, d, _ = brockett
     S = GeneralizedStiefel(M, K)
@@ -63,6 +65,7 @@ def test_results_codes_and_throw(brockett):
     assert stiefel.solvers.minimisers.to_optx_result(jnp.asarray(Status.LINE_SEARCH_FAILED)) == optx.RESULTS.nonlinear_divergence
 
 
+@pytest.mark.slow
 def test_runtime_values_do_not_recompile(brockett):
     """Tolerances are traced leaves: two solves differing only in them share one compilation."""
     W, M, F, d, _ = brockett

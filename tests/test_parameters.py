@@ -309,6 +309,7 @@ def cmm_lap():
     return mesh.laplacian(mesh.load(demo_mesh(subdivisions=2)))  # n = 162
 
 
+@pytest.mark.slow
 def test_block_cmm_max_iters_is_total_over_stages(cmm_lap):
     mu = 0.01 * cmm_lap.n
     free = compressed_modes(cmm_lap, K, mu, solver=BlockCMM(continuation=3, max_iters=2000), weighting="uniform")
@@ -320,6 +321,7 @@ def test_block_cmm_max_iters_is_total_over_stages(cmm_lap):
     assert small.iterations == 3 and small.status == "max_iters"  # stages 2 and 3 skipped
 
 
+@pytest.mark.slow
 def test_sequential_cmm_max_iters_is_total_over_columns(cmm_lap):
     mu = 0.01 * cmm_lap.n
     free = compressed_modes(cmm_lap, K, mu, solver=SequentialCMM(max_iters=2000), weighting="uniform")
@@ -336,6 +338,7 @@ def test_admm_max_iters_is_total(cmm_lap, make):
     assert res.iterations <= 7 and res.status == "max_iters" and res.orthogonality <= 1e-10
 
 
+@pytest.mark.slow
 def test_cmm_solve_max_iters_is_total_over_stages(cmm_lap):
     W = stiefel.SparseOperator.from_scipy(cmm_lap.W)
     a = jnp.asarray(cmm_lap.A.diagonal())

@@ -67,6 +67,7 @@ def test_violation_before_projection_is_order_one_over_rho():
     assert viol[100.0] < viol[10.0] / 9
 
 
+@pytest.mark.slow
 def test_args_are_traced_and_continuation_warm_starts():
     rhos = (10.0, 100.0)
     jax.clear_caches()  # res compiles here, whatever other modules in this process compiled
@@ -82,6 +83,7 @@ def test_args_are_traced_and_continuation_warm_starts():
     assert abs(float(res2.value) - 2 * OPT) / OPT <= 1e-9
 
 
+@pytest.mark.slow
 def test_status_never_claims_convergence():
     """Too few iterations: max_iters (or a failed line search), never converged; an objective that is NaN
     (here from the start: the square root of a negative number): non_finite."""

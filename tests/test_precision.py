@@ -25,6 +25,7 @@ def _true_objective(lap, mu, Psi):
     return float(np.sum(Psi * (lap.W @ Psi)) + mu * np.sum(w[:, None] * np.abs(Psi)))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("preconditioner", ["shifted", "jacobi"])
 def test_float32_block_solver_matches_float64(lap, preconditioner):
     mu = 0.01 * lap.n
@@ -50,6 +51,7 @@ def test_float32_block_solver_matches_float64(lap, preconditioner):
 
 @pytest.mark.parametrize("method, rel_tol", [("block", 1e3 * EPS32),
                                              pytest.param("sequential", 1e4 * EPS32, marks=pytest.mark.slow)])
+@pytest.mark.slow
 def test_compressed_modes_float32(lap, method, rel_tol):
     """``compressed_modes(dtype=float32)`` builds energy, preconditioner and start in float32 (it used
     to mix float64 operators into a float32 solve) and matches the float64 objective."""

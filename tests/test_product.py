@@ -106,6 +106,7 @@ def test_inner_norm_dist_are_factor_sums(problem):
     assert min(float(S.norm(x, z)) for S, x, z in zip(P.factors, X, xi)) > 0.05  # unequal shares of ‖ξ‖ = 1
 
 
+@pytest.mark.slow
 def test_dist_and_log(problem):
     """Along a geodesic, dist = ‖tξ‖ = t for a unit ξ only with dist = (Σ dist_i²)^{1/2} (a plain sum of the
     factors' distances would be t Σ‖ξ_i‖ > t); log inverts exp. Two Grassmann factors: closed forms, compiled
@@ -173,6 +174,7 @@ def test_grassmann_aliases_are_its_own_maps(problem):
 
 
 # --- slope checks ------------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_slope_checks_pass_on_a_coupled_objective(problem):
     P, X, F = problem["P"], problem["X"], problem["coupled"]
     g = stiefel.check_gradient(F, P, X)
@@ -207,6 +209,7 @@ SOLVERS = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", SOLVERS)
 def test_solvers_reach_the_sum_of_the_factor_minima(problem, name):
     P, Ms = problem["P"], problem["M"]
@@ -221,6 +224,7 @@ def test_solvers_reach_the_sum_of_the_factor_minima(problem, name):
     assert float(sol.stats["grad_norm"]) <= 1e-10
 
 
+@pytest.mark.slow
 def test_coupled_solve_under_jit(problem):
     P, F = problem["P"], problem["coupled"]
     X0 = P.random_point(jax.random.PRNGKey(11))
@@ -234,6 +238,7 @@ def test_coupled_solve_under_jit(problem):
     assert max(_gram_error(x, M) for x, M in zip(sol.value, problem["M"])) <= 1e-10
 
 
+@pytest.mark.slow
 def test_one_factor_product_takes_the_same_steps_as_its_factor(problem):
     S = problem["P"].factors[0]
     X0 = S.random_point(jax.random.PRNGKey(12))

@@ -81,6 +81,7 @@ def test_ellipsoid_retractions_refuse_k_above_one(retraction):
 @settings(max_examples=6, deadline=None)  # 12 cost 21 s of the default run
 @given(n=st.integers(3, 16), data=st.data(), seed=st.integers(0, 2**16),
        kind=st.sampled_from(M_KINDS), retraction=st.sampled_from(["cayley", "cholesky", "polar"]))
+@pytest.mark.slow
 def test_retraction_properties_over_shapes(n, data, seed, kind, retraction):
     k = data.draw(st.integers(1, min(n, 4)))
     S = GeneralizedStiefel(metric_matrix(kind, n, seed=seed), k, retraction=retraction)

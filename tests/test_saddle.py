@@ -101,6 +101,7 @@ def test_preconditioned_search_agrees(problem):
     assert float(c.value) == pytest.approx(reference, rel=1e-7)
 
 
+@pytest.mark.slow
 def test_mask_excludes_zero_padding_rows(problem):
     """Zero rows appended (a padded problem): their Hessian is −ξ sym(XᵀG), negative, and would be reported
     as curvature unless masked out; with the mask the padded problem's answer is the unpadded one's."""

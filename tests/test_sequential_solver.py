@@ -41,6 +41,7 @@ def problem():
     return W, M, f
 
 
+@pytest.mark.slow
 def test_mu_zero_reproduces_eigsh_plain_cg(problem):
     W, M, f = problem
     res = minimize_sequential(f, M, K, gtol=1e-10, max_iters=5000 * K)  # a total, shared by the K columns
@@ -54,7 +55,7 @@ def test_mu_zero_reproduces_eigsh_preconditioned(problem):
     assert int(np.max(np.asarray(res.iterations))) < 300  # preconditioning is what makes it fast
 
 
-@pytest.mark.parametrize("direction", ["gd", "momentum"])
+@pytest.mark.parametrize("direction", ["gd", pytest.param("momentum", marks=pytest.mark.slow)])
 def test_mu_zero_other_directions(problem, direction):
     W, M, f = problem
     res = minimize_sequential(f, M, K, gtol=1e-10, max_iters=3000 * K, direction=direction,  # total over K columns
@@ -62,6 +63,7 @@ def test_mu_zero_other_directions(problem, direction):
     assert_eigenpairs(res, W, M)
 
 
+@pytest.mark.slow
 def test_mu_zero_with_sparse_non_diagonal_metric():
     W = grid_laplacian(9)
     M = metric_matrix("sparse", W.shape[0], seed=2)
@@ -71,6 +73,7 @@ def test_mu_zero_with_sparse_non_diagonal_metric():
     assert_eigenpairs(res, W, M)
 
 
+@pytest.mark.slow
 def test_history_start_and_monotone_decrease(problem):
     W, M, f = problem
     X0 = np.random.default_rng(1).standard_normal((W.shape[0], K))

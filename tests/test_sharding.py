@@ -19,6 +19,9 @@ from stiefel.solvers.sharding import shard_rows, solve_sharded
 
 from mesh_fixtures import surface_arrays, write_mesh
 
+# a subprocess with four virtual devices compiles its own solver (~15 s): in the slow suite, which CI runs too
+pytestmark = pytest.mark.slow
+
 ROOT = Path(__file__).resolve().parents[1]
 
 CHILD = textwrap.dedent(
@@ -81,6 +84,7 @@ def child_report(tmp_path_factory):
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
+@pytest.mark.slow
 def test_x_is_split_by_rows_over_four_devices(child_report):
     r = child_report
     assert r["devices"] == 4 and r["x_devices"] == [0, 1, 2, 3]

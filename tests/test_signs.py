@@ -53,6 +53,7 @@ def test_canonical_signs_rule_numpy_and_jax():
 
 @pytest.mark.parametrize("make", [BlockCMM, SequentialCMM, ADMMCMM, SequentialADMMCMM, "fast"],
                          ids=["block", "sequential", "admm", "admm_sequential", "fast"])
+@pytest.mark.slow
 def test_every_cmm_solver_returns_canonical_signs(small, make):
     m, lap = small
     if make == "fast":
@@ -80,6 +81,7 @@ def test_bases_and_eigenbases_have_canonical_signs(small):
     assert _peaks_positive(lm.Psi)
 
 
+@pytest.mark.slow
 def test_batch_and_differentiable_solves_have_canonical_signs(small):
     _, lap = small
     W, a = unpack_laplacian(lap)

@@ -54,6 +54,7 @@ def test_optimum_and_quadratic_convergence(kind):
     assert int(st["n_accepted"]) <= int(st["num_steps"])
 
 
+@pytest.mark.slow
 def test_finite_difference_hessian_and_first_order_agree():
     W, M, F, d, target = _brockett()
     S = GeneralizedStiefel(M, K)
@@ -93,6 +94,7 @@ def test_truncated_cg_solves_the_newton_system_inside_the_region():
     assert int(neg.stop) == TCGStop.NEGATIVE_CURVATURE and abs(float(S.norm(X, neg.eta)) - 0.5) <= 1e-12
 
 
+@pytest.mark.slow
 def test_preconditioner_cuts_inner_iterations():
     W, M, F, d, target = _brockett(m=12)
     S = GeneralizedStiefel(M, K)
@@ -105,6 +107,7 @@ def test_preconditioner_cuts_inner_iterations():
     assert int(prec["n_inner"]) < 0.5 * int(plain["n_inner"]), (int(prec["n_inner"]), int(plain["n_inner"]))
 
 
+@pytest.mark.slow
 def test_statuses():
     W, M, F, d, _ = _brockett()
     S = GeneralizedStiefel(M, K)
@@ -154,6 +157,7 @@ def test_options_validated(kwargs, match):
         RiemannianTrustRegion(S, **kwargs)
 
 
+@pytest.mark.slow
 def test_runtime_options_do_not_recompile_and_vmap():
     W, M, F, d, target = _brockett()
     S = GeneralizedStiefel(M, K)
@@ -175,6 +179,7 @@ def test_runtime_options_do_not_recompile_and_vmap():
     assert np.allclose(np.asarray(values), target, rtol=1e-10)
 
 
+@pytest.mark.slow
 def test_implicit_derivative_through_trust_region_solve():
     """d/dθ of a non-invariant quantity of the solution of tr(XᵀW(θ)XD) against re-solved central FDs."""
     W, M, F, d, _ = _brockett()
