@@ -22,7 +22,7 @@ def problem():
     block solver's (smoothed) modes."""
     W, a = unpack_laplacian(mesh.laplacian(sphere(3)))
     mu = 10.0 * first_eigenpairs(W, a, K)[0][-1]
-    smooth = compressed_modes((W, a), K, mu)
+    smooth = compressed_modes((W, a), K, mu, finish=None)
     return W, a, l1_weights_np(a, "area"), mu, smooth
 
 
@@ -150,10 +150,12 @@ def test_finish_gives_exact_zeros_orthonormal_stationary(problem, finished):
     assert np.all(np.abs(v[~on]) <= t.repeat(K, axis=1)[~on] * (1 + 1e-6))
 
 
-def test_compressed_modes_with_finish_keeps_the_smooth_answer(problem):
+def test_compressed_modes_finishes_by_default_and_keeps_the_smooth_answer(problem):
+    """The default answer is the finished one, certified by its residual; ``finish=None`` is the smoothed one."""
     W, a, w, mu, smooth = problem
-    res = compressed_modes((W, a), K, mu, finish=SupportFinish())
-    assert res.finish["status"] == "converged"
+    res = compressed_modes((W, a), K, mu)
+    assert res.status == res.finish["status"] == "converged" and res.finish["solver_status"] == smooth.status
+    assert res.l1_residual <= res.finish["tol"] == SupportFinish().tol
     assert res.objective <= smooth.objective
     assert np.array_equal(res.smooth_modes, smooth.modes)
     assert res.exact_zeros == pytest.approx(np.mean(res.modes == 0.0))

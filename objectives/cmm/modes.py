@@ -42,8 +42,9 @@ from stiefel.validation import (check_count, check_finite, check_full_rank, chec
 
 from ..admm.splitting import l1_weights_np, orthonormalize
 from ..energy.l1_optimality import l1_stationarity, support_stats
-from .support_finish import SupportFinish, finish_support
-from .base import _no_callback
+from .certify import certify
+from .support_finish import SupportFinish
+from .base import SolverRun, _no_callback
 from .solvers import SOLVERS, BlockCMM, CMMSolver, SolverOptionError, Start
 
 __all__ = ["CMMResult", "compressed_modes", "select_mu", "METHODS", "unpack_laplacian", "first_eigenpairs"]
@@ -64,7 +65,7 @@ class CMMResult:
     sparsity: fractions of entries with ``|ψ| < 1e-6·max|ψ|`` and ``< 1e-3·max|ψ|``.
     orthogonality: ``max|ΨᵀAΨ − I|``.
     iterations, wall_time (s, compile excluded; includes the preconditioner's and ADMM's
-      factorisations), compile_time, status, method, params (the arguments; for the ADMM
+      factorisations and the finish), compile_time, method, params (the arguments; for the ADMM
       methods also ``rho0``, the initial penalty used, and ``step_times``, seconds per step — Ψ/X, E, S,
       dual, residual, objective; for ``BlockCMM`` ``saddles``, its saddle checks, when it made any).
     history: objective trace ``{"time": (T,), "objective": (T,)}`` where available.
@@ -72,9 +73,11 @@ class CMMResult:
       nonzero entries and their share of the total area (``objectives.energy.l1_optimality.support_stats``).
     l1_residual: the exact ℓ1 stationarity residual (docs/maths.md §9, eq. 9.10), relative — the convergence
       measure of the non-smooth problem (meaningful for modes with exact zeros: ``finish`` or ADMM's split).
-    finish: with ``compressed_modes(finish=SupportFinish())`` the finish's record (status, objective before
-      and after, rounds, Newton and CG iterations, W products, entries added/removed, seconds), else None;
-      smooth_modes: then the solver's own (smoothed) modes, sorted and signed like ``modes``.
+    status: ``"converged"`` iff the modes were finished and ``l1_residual ≤ finish.tol`` (``objectives.cmm.certify``),
+      else the reason; unfinished (``finish=None``, μ = 0, interrupted): the smoothed solver's status.
+    finish: when finished (the default), its record (status, the finish's own and the solver's status, tol,
+      objective before and after, rounds, Newton and CG iterations, W products, entries added/removed,
+      seconds), else None; smooth_modes: then the solver's own (smoothed) modes, sorted and signed like ``modes``.
     """
 
     modes: np.ndarray
@@ -224,13 +227,15 @@ def compressed_modes(
     stop=None,
     verbose: bool = False,
     eigenpairs: tuple | None = None,
-    finish: SupportFinish | None = None,
+    finish: SupportFinish | None = SupportFinish(),
 ) -> CMMResult:
     """Compressed manifold modes of a Laplacian ``(W, A)``.
 
     Args:
       lap: ``mesh.Laplacian`` (``.W``, ``.A``) or a pair ``(W, A)`` (A diagonal, positive; finite entries).
-      k: number of modes, an integer in ``[1, n]``; mu: sparsity weight μ ≥ 0 (absolute).
+      k: number of modes, an integer in ``[1, n]``; mu: sparsity weight μ ≥ 0 (absolute). At μ = 0 the
+        minimisers are the first k eigenfunctions: they are returned (``first_eigenpairs``, status
+        ``"converged"``, ``params["route"] = "eigenbasis"``) without a solve, except by ``FastCMM``.
       solver: ``BlockCMM`` (default), ``SequentialCMM``, ``ADMMCMM``, ``SequentialADMMCMM`` or
         ``FastCMM(U)`` (``objectives.cmm.solvers``), with its options.
       weighting: ``"area"`` or ``"uniform"`` ℓ1 weights (docs/maths.md §4).
@@ -250,10 +255,12 @@ def compressed_modes(
         ``supports_progress``; when set — or on Ctrl-C during such a solve — the result holds the modes
         reached, with status ``"interrupted"``.
 
-      finish: ``SupportFinish(...)`` (``objectives.cmm.support_finish``) to finish the solver's modes on the exact
-        ℓ1 problem restricted to their identified support: exact zeros, A-orthonormal to 1e-14, a true
-        objective no higher than the solver's (else the solver's modes, status ``objective_increased``);
-        the smooth modes stay in ``smooth_modes``. None (default): the solver's modes.
+      finish: ``SupportFinish(...)`` (default ``SupportFinish()``, ``objectives.cmm.support_finish``) finishes the
+        solver's smoothed modes on the exact ℓ1 problem on their identified support: exact zeros, A-orthonormal
+        to 1e-12, a true objective no higher than the solver's, and the status derived from the exact ℓ1
+        stationarity residual (``"converged"`` iff ``l1_residual ≤ finish.tol``; ``objectives.cmm.certify``);
+        the smoothed modes stay in ``smooth_modes``. None: the solver's smoothed modes and status. Not applied
+        at μ = 0 (the eigenbasis) or to an interrupted solve.
       eigenpairs: optional ``(evals, evecs)``, the first ``m ≥ max(k, 2)`` generalised eigenpairs of
         ``(W, A)`` (ascending, A-orthonormal: ``first_eigenpairs(W, a, m)``), used instead of solving
         for them — for several solves of one Laplacian (``stiefel compare-smoothings`` computes them once).
@@ -287,10 +294,11 @@ def compressed_modes(
     if verbose:
         progress = _printer(progress)
     live = dict(progress=progress, stop=stop) if solver.supports_progress else {}
+    eigen_route = mu == 0.0 and not solver.restricted  # the minimisers are the eigenbasis: no iterative solve
     t_setup = time.perf_counter()
     if eigenpairs is not None:
         evals, evecs = _given_eigenpairs(eigenpairs, n, max(k, 2))
-    elif solver.needs_eigenpairs(kind):
+    elif solver.needs_eigenpairs(kind) or eigen_route:
         evals, evecs = first_eigenpairs(W, a, max(k, 2))
     else:
         evals, evecs = None, None
@@ -303,19 +311,16 @@ def compressed_modes(
     else:
         X0 = np.asarray(start, dtype=np.float64)
     setup_time = time.perf_counter() - t_setup
-    run = solver.solve(W, a, k, mu, Start(kind, X0, evals), weighting=weighting, seed=seed, dtype=dtype,
-                       callback=callback, **live)
-    finished, smooth_modes, wall_time = None, None, run.wall_time
-    Psi_out, w, residual = run.Psi, l1_weights_np(a, weighting), None
-    if finish is not None:
-        fr = finish_support(W, a, w, mu, run.Psi, finish)
-        finished = dict(status=fr.status, objective_before=fr.objective_before, objective=fr.objective,
-                        rounds=fr.rounds, newton_iterations=fr.newton_iterations, cg_iterations=fr.cg_iterations,
-                        w_products=fr.w_products, added=fr.added, removed=fr.removed, wall_time=fr.wall_time,
-                        violations=fr.stationarity.violations)
-        smooth_modes = _diagnostics(W, a, mu, weighting, run.Psi)[0]
-        Psi_out, wall_time, residual = fr.Psi, wall_time + fr.wall_time, fr.stationarity.relative
-    Psi, lam, dirichlet_part, l1_part, sparsity, orth = _diagnostics(W, a, mu, weighting, Psi_out)
+    if eigen_route:
+        run = SolverRun(evecs[:, :k], 0, "converged", setup_time, 0.0, {}, {"route": "eigenbasis"})
+    else:
+        run = solver.solve(W, a, k, mu, Start(kind, X0, evals), weighting=weighting, seed=seed, dtype=dtype,
+                           callback=callback, **live)
+    w = l1_weights_np(a, weighting)
+    cert = certify(W, a, w, mu, run.Psi, run.status, finish)
+    wall_time, residual = run.wall_time + cert.seconds, cert.residual
+    smooth_modes = None if cert.smooth_modes is None else _diagnostics(W, a, mu, weighting, cert.smooth_modes)[0]
+    Psi, lam, dirichlet_part, l1_part, sparsity, orth = _diagnostics(W, a, mu, weighting, cert.Psi)
     support = support_stats(Psi, a)
     if residual is None:  # (invariant under the column order and signs _diagnostics applies)
         residual = l1_stationarity(W, a, w, mu, Psi).relative
@@ -328,9 +333,9 @@ def compressed_modes(
     return CMMResult(
         modes=Psi, compressed_eigenvalues=lam, objective=dirichlet_part + l1_part, dirichlet=dirichlet_part,
         l1=l1_part, sparsity=sparsity, orthogonality=orth, iterations=int(run.iterations), wall_time=wall_time,
-        compile_time=run.compile_time, status=run.status, method=solver.name, params=params, history=run.history,
+        compile_time=run.compile_time, status=cert.status, method=solver.name, params=params, history=run.history,
         exact_zeros=support["exact_zeros"], support_sizes=support["support_sizes"],
-        support_areas=support["support_areas"], l1_residual=residual, finish=finished, smooth_modes=smooth_modes,
+        support_areas=support["support_areas"], l1_residual=residual, finish=cert.finish, smooth_modes=smooth_modes,
     )
 
 

@@ -21,7 +21,7 @@ exactly zero). Zero entries that violate (9.9) (``|v_ij| > μ w_i``, ``v = 2WΦ 
 sign ``−sign v_ij`` once their violation is comparable to the gradient on ``S``; zeros of ``S`` whose projected
 step points out of their orthant leave ``S`` before the line search. It stops when the gradient on ``S`` is at
 round-off or the objective stalls; the exact stationarity residual (9.10) is the convergence measure
-("converged" only when it is at round-off, else "stalled").
+("converged" only when it is at most ``tol``, else "stalled").
 """
 
 from __future__ import annotations
@@ -45,8 +45,8 @@ from ..energy.l1_optimality import L1Stationarity, MaskedGram, l1_stationarity, 
 ADD_RATIO = 10.0
 #: support entries below this fraction of their column's peak count as at zero for leaving the support
 TINY = 1e-6
-#: "converged" needs (9.10) within this factor of gtol when the steps stop, else "stalled"
-STALL_FACTOR = 1e3
+#: relative change of the objective within its round-off (``_at_floor``)
+ROUNDOFF = 1e-12
 #: a Newton run stops as "stalled" when the objective fell by ≤ 1e-10 (relative) over this many steps
 STALL_WINDOW = 20
 #: a column's preconditioner factor is rebuilt when its support shrank by more than this fraction
@@ -63,6 +63,7 @@ class SupportFinish:
 
     threshold: initial support = entries with ``|Φ_ij| > threshold · max_i |Φ_ij|`` (relative, in [0, 1)).
     gtol: a support's Newton solve stops at ``‖grad‖_A ≤ gtol · scale`` (scale of eq. 9.10).
+    tol: the certificate: "converged" only when the exact ℓ1 stationarity residual (9.10, relative) is ≤ tol.
     max_rounds: active-set rounds (drop sign flips / add violators); max_newton: Newton steps in all.
     max_cg: CG iterations per Newton step. kkt_margin: a zero entry is freed when
     ``|v_ij| > (1 + kkt_margin) μ w_i``.
@@ -70,6 +71,7 @@ class SupportFinish:
 
     threshold: float = 1e-3
     gtol: float = 1e-9
+    tol: float = 1e-8
     max_rounds: int = 30
     max_newton: int = 300
     max_cg: int = 200
@@ -80,6 +82,7 @@ class SupportFinish:
 
         check_number("threshold", self.threshold, low=0.0, high=1.0, high_open=True, error=SolverOptionError)
         check_number("gtol", self.gtol, low=0.0, error=SolverOptionError)
+        check_number("tol", self.tol, low=0.0, low_open=True, error=SolverOptionError)
         check_number("kkt_margin", self.kkt_margin, low=0.0, error=SolverOptionError)
         check_count("max_rounds", self.max_rounds, 1, error=SolverOptionError)
         check_count("max_newton", self.max_newton, 1, error=SolverOptionError)
@@ -247,6 +250,16 @@ def _truncated_cg(prob: _Restricted, gram, Phi, lam, grad, rtol: float, max_cg: 
     return eta, it
 
 
+def _at_floor(prob: _Restricted, trial, W_trial, f_trial: float, f: float, gnorm: float) -> bool:
+    """A full step whose decrease is below the round-off of f (Armijo cannot see it) is taken when it keeps the
+    support and halves the gradient: near the minimiser Newton's quadratic convergence shows in the gradient
+    long after f has stopped moving (measured: the hand stand-in, k = 6, stopped at residual 1.7e-8 without)."""
+    if f_trial > f + ROUNDOFF * max(abs(f), 1.0) or np.any(trial[1] != prob.mask):
+        return False
+    grad = prob.point(trial[0], W_trial)[2]
+    return bool(np.sqrt(prob.inner(grad, grad)) <= 0.5 * gnorm)
+
+
 def _newton(prob: _Restricted, Phi, gtol_abs: float, scale: float, budget: int, max_cg: int, margin: float):
     """Orthant-wise Riemannian Newton-CG on (9.16): Armijo backtracking on the true objective along
     ``orthant_retract`` (entries reaching zero leave the support). Returns (Φ, WΦ, steps, cg, dropped,
@@ -323,7 +336,7 @@ def _newton(prob: _Restricted, Phi, gtol_abs: float, scale: float, budget: int, 
                 if trial is not None:
                     W_trial = prob.matvec(trial[0])
                     f_trial = prob.value(trial[0], W_trial)
-                    if f_trial <= f + 1e-4 * t * slope:
+                    if f_trial <= f + 1e-4 * t * slope or (t == 1.0 and _at_floor(prob, trial, W_trial, f_trial, f, gnorm)):
                         found = trial
                         break
                 if -slope * t <= 1e-15 * max(abs(f), 1.0):  # below round-off of f: no measurable decrease left
@@ -412,7 +425,7 @@ def _finish(W, a, w, mu: float, Psi, options: SupportFinish, sigma: float | None
         Phi, after, status = Psi, before, "objective_increased"
     stationarity = l1_stationarity(W, a, w, mu, Phi)
     if status in ("converged", "stalled"):  # the steps stopped: (9.10) tells round-off from a stall
-        status = "converged" if stationarity.relative <= STALL_FACTOR * options.gtol else "stalled"
+        status = "converged" if stationarity.relative <= options.tol else "stalled"
     return FinishResult(Psi=Phi, status=status, objective=after, objective_before=before,
                         stationarity=stationarity, rounds=rounds, newton_iterations=newton, cg_iterations=cg,
                         w_products=products, added=added, removed=removed, wall_time=time.perf_counter() - t0,

@@ -59,10 +59,8 @@ def cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir)
     target = f"target sparsity {args.target_sparsity:g}" if args.target_sparsity is not None else None
     say(f"solving: k = {args.k}, mu = {target or f'{mu:.6g} ({spec.text})'}, method = {args.method}, "
         f"smoothing = {smoothing}, weighting = {args.weighting}, start = {args.start}")
-    if getattr(args, "finish", False):
-        from objectives import SupportFinish
-
-        extra["finish"] = SupportFinish()
+    if not args.finish:
+        extra["finish"] = None  # the smoothed solver's modes and status (the default finishes them)
     partial = _partial_writer(args.method, compressed_modes, out, say)
     if partial is not None:
         extra["callback"] = partial
@@ -93,7 +91,7 @@ def cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir)
             f"{res.finish['wall_time']:.2f} s")
 
     t = time.perf_counter()
-    support = _supports(res.modes, np.asarray(lap.A.diagonal()))
+    support = res.support_areas  # measured: the share of the area where a mode is not exactly zero
     diag = {"objective": res.objective, "dirichlet": res.dirichlet, "l1": res.l1, "sparsity": res.sparsity,
             "support_area": support, "orthogonality": res.orthogonality, "iterations": res.iterations,
             "status": res.status, "exact_zeros": res.exact_zeros, "support_sizes": res.support_sizes,
@@ -137,15 +135,6 @@ def cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir)
         say(f"wrote {out / 'modes.png'}")
     say(f"wrote {out / 'summary.json'}")
     return _exit_code(interrupt)
-
-
-def _supports(modes: Any, area: Any, threshold: float = 1e-3) -> list[float]:
-    """Per mode, the fraction of the surface's area where ``|ψ| ≥ threshold · max|ψ|`` (areas sum to 1)."""
-    import numpy as np
-
-    P = np.abs(np.asarray(modes))
-    on = P >= threshold * np.max(P, axis=0, keepdims=True)
-    return [float(v) for v in (area[:, None] * on).sum(axis=0) / area.sum()]
 
 
 _PARTIAL_NOTE = ("modes are written when the solve finishes (only --method sequential reports its columns "

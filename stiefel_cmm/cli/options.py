@@ -18,7 +18,7 @@ option                      API                                         default
 ``--continuation``, ``--continuation-start`` ``BlockCMM(continuation=, continuation_start=)``
 ``--optimizer``, ``--preconditioner`` ``BlockCMM(optimizer=, preconditioner=)`` cg, shifted
 ``--gtol``, ``--max-iters`` every solver's ``gtol`` / ``max_iters``
-``--finish``                ``compressed_modes(finish=SupportFinish())`` off
+``--finish`` / ``--no-finish`` ``compressed_modes(finish=SupportFinish() / None)`` finish (exact zeros)
 =========================== =========================================== ==============================
 """
 
@@ -181,10 +181,11 @@ def add_cmm_options(p: argparse.ArgumentParser, *, single_smoothing: bool) -> No
                        help="ℓ1 smoothing by name or alias (f0 … f9; huber = f6, l1 = abs = f0, logcosh = f8, …: "
                             "objectives.energy.smoothings); default f6 (huber)")
     if single_smoothing:
-        p.add_argument("--finish", action="store_true",
+        p.add_argument("--finish", action=argparse.BooleanOptionalAction, default=True,
                        help="finish the modes on the exact ℓ1 problem on their identified support "
-                            "(objectives.SupportFinish): exact zeros, the ℓ1 stationarity residual in summary.json; "
-                            "the solver's own modes are kept in modes.npz as smooth_modes")
+                            "(objectives.SupportFinish; the default): exact zeros, the status and the ℓ1 stationarity "
+                            "residual in summary.json from it, the solver's own modes kept in modes.npz as "
+                            "smooth_modes; --no-finish: the smoothed solver's modes and status")
     p.add_argument("--eps", type=_positive_type, default=None,
                    help="smoothing parameter ε (default 1e-3; which of ε, δ a smoothing uses: objectives.energy.smoothings)")
     p.add_argument("--delta", type=_positive_type, default=None,
