@@ -22,9 +22,9 @@ def problem():
 @pytest.mark.slow
 def test_saddle_check_escapes_the_plateau(problem):
     W, a, pairs, mu = problem
-    plain = compressed_modes((W, a), K, mu, solver=BlockCMM(saddle_checks=0), eigenpairs=pairs)
-    checked = compressed_modes((W, a), K, mu, solver=BlockCMM(), eigenpairs=pairs)
-    admm = compressed_modes((W, a), K, mu, solver=ADMMCMM(), eigenpairs=pairs)
+    plain = compressed_modes((W, a), K, mu, solver=BlockCMM(saddle_checks=0), eigenpairs=pairs, finish=None)
+    checked = compressed_modes((W, a), K, mu, solver=BlockCMM(), eigenpairs=pairs, finish=None)
+    admm = compressed_modes((W, a), K, mu, solver=ADMMCMM(), eigenpairs=pairs, finish=None)
     assert "saddles" not in plain.params
     records = checked.params["saddles"]
     escapes = [r for r in records if r["step"] > 0]

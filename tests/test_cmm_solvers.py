@@ -169,7 +169,7 @@ def test_eigenpairs_are_computed_once_and_only_when_used(demo, monkeypatch):
                 (ADMMCMM(max_iters=2), "random", 0), (FastCMM(U, max_iters=2), "eigen", 0)]
     for solver, start, n_calls in expected:
         calls.clear()
-        res = compressed_modes(lap, K, 0.01 * lap.n, solver=solver, start=start, weighting="uniform")
+        res = compressed_modes(lap, K, 0.01 * lap.n, solver=solver, start=start, weighting="uniform", finish=None)
         assert len(calls) == n_calls, (solver, start)
         assert res.orthogonality <= 1e-10
 
@@ -198,7 +198,7 @@ REFERENCE = [  # solver, expected objective and iterations under the keyword API
 def test_each_solver_reproduces_the_keyword_api(demo, make, objective, iterations):
     lap, U = demo
     solver = make(U)
-    res = compressed_modes(lap, K, 0.01 * lap.n, solver=solver, weighting="uniform")
+    res = compressed_modes(lap, K, 0.01 * lap.n, solver=solver, weighting="uniform", finish=None)
     if isinstance(solver, (BlockCMM, SequentialCMM)):
         # compiled manifold solvers: XLA's rounding differs between CPUs (AVX2 / AVX-512), and the stall and
         # saddle tests turn that into a few more or fewer iterations (block 115 → 115, 119 → 120, sequential

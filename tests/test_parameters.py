@@ -312,21 +312,21 @@ def cmm_lap():
 @pytest.mark.slow
 def test_block_cmm_max_iters_is_total_over_stages(cmm_lap):
     mu = 0.01 * cmm_lap.n
-    free = compressed_modes(cmm_lap, K, mu, solver=BlockCMM(continuation=3, max_iters=2000), weighting="uniform")
+    free = compressed_modes(cmm_lap, K, mu, solver=BlockCMM(continuation=3, max_iters=2000), weighting="uniform", finish=None)
     assert free.status == "converged"
     cap = free.iterations - 1  # smaller than the sum of the stages, larger than any one (per stage: no cap)
-    res = compressed_modes(cmm_lap, K, mu, solver=BlockCMM(continuation=3, max_iters=cap), weighting="uniform")
+    res = compressed_modes(cmm_lap, K, mu, solver=BlockCMM(continuation=3, max_iters=cap), weighting="uniform", finish=None)
     assert res.iterations <= cap and res.status == "max_iters"
-    small = compressed_modes(cmm_lap, K, mu, solver=BlockCMM(continuation=3, max_iters=3), weighting="uniform")
+    small = compressed_modes(cmm_lap, K, mu, solver=BlockCMM(continuation=3, max_iters=3), weighting="uniform", finish=None)
     assert small.iterations == 3 and small.status == "max_iters"  # stages 2 and 3 skipped
 
 
 @pytest.mark.slow
 def test_sequential_cmm_max_iters_is_total_over_columns(cmm_lap):
     mu = 0.01 * cmm_lap.n
-    free = compressed_modes(cmm_lap, K, mu, solver=SequentialCMM(max_iters=2000), weighting="uniform")
+    free = compressed_modes(cmm_lap, K, mu, solver=SequentialCMM(max_iters=2000), weighting="uniform", finish=None)
     cap = free.iterations - 1
-    res = compressed_modes(cmm_lap, K, mu, solver=SequentialCMM(max_iters=cap), weighting="uniform")
+    res = compressed_modes(cmm_lap, K, mu, solver=SequentialCMM(max_iters=cap), weighting="uniform", finish=None)
     assert res.iterations <= cap and res.status == "max_iters"
 
 
