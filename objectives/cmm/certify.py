@@ -52,12 +52,10 @@ def certify(W, a: np.ndarray, w: np.ndarray, mu: float, Psi: np.ndarray, solver_
         return Certified(Psi, solver_status, None, None, None, 0.0)
     fr = finish_support(W, a, w, mu, Psi, finish)
     residual = float(fr.stationarity.relative)
-    if fr.status == "objective_increased":  # the solver's modes were kept: say so, whatever their residual
-        status = fr.status
-    elif np.isfinite(residual) and residual <= finish.tol:
-        status = "converged"
-    else:
-        status = fr.status if fr.status != "converged" else "stalled"
+    # objective_increased: the solver's modes were kept, say so whatever their residual (a NaN residual fails ≤);
+    # otherwise the finish's reason ("converged" from the finish itself already means residual ≤ tol)
+    certified = fr.status != "objective_increased" and residual <= finish.tol
+    status = "converged" if certified else fr.status
     record = dict(status=status, finish_status=fr.status, solver_status=solver_status, tol=finish.tol,
                   objective_before=fr.objective_before, objective=fr.objective, rounds=fr.rounds,
                   newton_iterations=fr.newton_iterations, cg_iterations=fr.cg_iterations, w_products=fr.w_products,
