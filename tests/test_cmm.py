@@ -273,6 +273,7 @@ def test_select_mu_brackets_a_target_sparsity(knight):
     assert res.params["mu"] == mu
 
 
+@pytest.mark.slow
 def test_sequential_callback_reports_each_column(knight):
     seen = []
     res = compressed_modes(knight, 3, 0.01 * knight.n, solver=SequentialCMM(max_iters=200),

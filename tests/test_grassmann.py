@@ -67,7 +67,7 @@ def test_checks_and_dimension():
     assert G.dim == K * (N - K)
 
 
-@pytest.mark.parametrize("solver", ["tr", "lbfgs", "cg"])
+@pytest.mark.parametrize("solver", ["tr", "lbfgs", pytest.param("cg", marks=pytest.mark.slow)])
 def test_dominant_invariant_subspace(solver):
     """max tr(XᵀAX) on Grassmann(M, k): the top k generalised eigenvalues (pymanopt's first example)."""
     A, M, G, X0 = _setup(4)

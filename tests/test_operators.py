@@ -224,7 +224,7 @@ def test_symmetric_factor_rejects_indefinite_only_when_checking(backend):
         SymmetricFactor(sp.csr_matrix(np.array([[1.0, 1.0], [1.0, 1.0]])), backend=backend)
 
 
-@pytest.mark.parametrize("k", [None, 3, 40])
+@pytest.mark.parametrize("k", [None, 3, pytest.param(40, marks=pytest.mark.slow)])
 def test_quadratic_form_value_and_derivatives(k):
     """tr(XᵀWX) and its custom JVP: gradient 2WX, Hessian 2W, derivative in W's values."""
     from stiefel.linalg.operators import quadratic_form

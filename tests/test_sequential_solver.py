@@ -55,7 +55,8 @@ def test_mu_zero_reproduces_eigsh_preconditioned(problem):
     assert int(np.max(np.asarray(res.iterations))) < 300  # preconditioning is what makes it fast
 
 
-@pytest.mark.parametrize("direction", ["gd", pytest.param("momentum", marks=pytest.mark.slow)])
+@pytest.mark.slow
+@pytest.mark.parametrize("direction", ["gd", "momentum"])
 def test_mu_zero_other_directions(problem, direction):
     W, M, f = problem
     res = minimize_sequential(f, M, K, gtol=1e-10, max_iters=3000 * K, direction=direction,  # total over K columns

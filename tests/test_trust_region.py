@@ -36,7 +36,7 @@ def _order(gnorms):
     return (c - b) / (b - a)
 
 
-@pytest.mark.parametrize("kind", M_KINDS)
+@pytest.mark.parametrize("kind", [k if k != "sparse" else pytest.param(k, marks=pytest.mark.slow) for k in M_KINDS])
 def test_optimum_and_quadratic_convergence(kind):
     W, M, F, d, target = _brockett(kind)
     S = GeneralizedStiefel(M, K)
