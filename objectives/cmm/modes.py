@@ -77,7 +77,8 @@ class CMMResult:
       else the reason; unfinished (``finish=None``, μ = 0, interrupted): the smoothed solver's status.
     finish: when finished (the default), its record (status, the finish's own and the solver's status, tol,
       objective before and after, rounds, Newton and CG iterations, W products, entries added/removed,
-      seconds), else None; smooth_modes: then the solver's own (smoothed) modes, sorted and signed like ``modes``.
+      seconds, and ``trace``: per Newton iterate the true objective, the gradient norm on the support and the
+      zeros' (9.9) violation relative to the scale of eq. 9.10, support size and CG iterations), else None; smooth_modes: then the solver's own (smoothed) modes, sorted and signed like ``modes``.
     """
 
     modes: np.ndarray

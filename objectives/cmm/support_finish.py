@@ -97,7 +97,9 @@ class FinishResult:
     status: one of ``FINISH_STATUSES``; objective / objective_before: the true objective after and before;
     stationarity: eq. (9.10) of ``Psi``; rounds, newton_iterations, cg_iterations, w_products;
     added / removed: support entries freed / dropped over all rounds; wall_time (s);
-    support: ``support_stats`` of ``Psi`` (exact-zero fraction, support sizes and areas per mode).
+    support: ``support_stats`` of ``Psi`` (exact-zero fraction, support sizes and areas per mode);
+    trace: ``(T, 5)`` per Newton iterate — true objective, ``‖grad‖_A`` on the support and the (9.9) violation
+    of the zeros (``A⁻¹``-norm), both relative to the scale of eq. 9.10, support size, CG iterations of its step.
     """
 
     Psi: np.ndarray
@@ -113,6 +115,7 @@ class FinishResult:
     removed: int
     wall_time: float
     support: dict
+    trace: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 5)))
 
 
 class _Restricted:
@@ -260,10 +263,12 @@ def _at_floor(prob: _Restricted, trial, W_trial, f_trial: float, f: float, gnorm
     return bool(np.sqrt(prob.inner(grad, grad)) <= 0.5 * gnorm)
 
 
-def _newton(prob: _Restricted, Phi, gtol_abs: float, scale: float, budget: int, max_cg: int, margin: float):
+def _newton(prob: _Restricted, Phi, gtol_abs: float, scale: float, budget: int, max_cg: int, margin: float,
+            trace: list):
     """Orthant-wise Riemannian Newton-CG on (9.16): Armijo backtracking on the true objective along
     ``orthant_retract`` (entries reaching zero leave the support). Returns (Φ, WΦ, steps, cg, dropped,
-    status)."""
+    status); appends ``(objective, ‖grad‖_A / scale, violation / scale, support size, CG iterations)`` per
+    iterate to ``trace``."""
     WPhi = prob.matvec(Phi)
     f = prob.value(Phi, WPhi)
     steps = cg = dropped = added = 0
@@ -300,6 +305,7 @@ def _newton(prob: _Restricted, Phi, gtol_abs: float, scale: float, budget: int, 
                 gnorm = np.sqrt(prob.inner(grad, grad))
         # zero entries violating (9.9) join the support when their violation is comparable to the gradient
         violate, viol_norm, v = prob.violations(Phi, WPhi, lam, margin)
+        trace.append([f, gnorm / scale, viol_norm / scale, int(prob.mask.sum()), 0])
         if violate.any() and viol_norm >= ADD_RATIO * gnorm:
             added += int(violate.sum())
             mask, signs = prob.mask.copy(), prob.signs.copy()
@@ -315,6 +321,7 @@ def _newton(prob: _Restricted, Phi, gtol_abs: float, scale: float, budget: int, 
             return Phi, WPhi, steps, cg, dropped, added, "max_iters"
         eta, n_cg = _truncated_cg(prob, gram, Phi, lam, grad, min(0.5, np.sqrt(gnorm / scale)), max_cg)
         cg += n_cg
+        trace[-1][4] = n_cg
         found = None
         for attempt in range(2):  # the Newton direction, then (if it fails) the preconditioned gradient
             if attempt == 1:
@@ -407,6 +414,7 @@ def _finish(W, a, w, mu: float, Psi, options: SupportFinish, sigma: float | None
     rounds = newton = cg = products = added = removed = 0
     status = "max_rounds"
     prob = _Restricted(W, a, w, mu, mask, signs, sigma)
+    trace: list = []
     start = prob.orthant_retract(Psi)
     Phi = None if start is None else start[0]
     if start is None:
@@ -417,7 +425,7 @@ def _finish(W, a, w, mu: float, Psi, options: SupportFinish, sigma: float | None
     while Phi is not None and rounds < options.max_rounds:
         rounds += 1
         Phi, WPhi, steps, n_cg, dropped, n_added, st = _newton(
-            prob, Phi, gtol_abs, scale, options.max_newton - newton, options.max_cg, options.kkt_margin)
+            prob, Phi, gtol_abs, scale, options.max_newton - newton, options.max_cg, options.kkt_margin, trace)
         newton, cg, removed, added = newton + steps, cg + n_cg, removed + dropped, added + n_added
         status = st
         if st != "line_search_failed" or steps <= 1:  # a failed line search is retried once from a new round
@@ -434,4 +442,4 @@ def _finish(W, a, w, mu: float, Psi, options: SupportFinish, sigma: float | None
     return FinishResult(Psi=Phi, status=status, objective=after, objective_before=before,
                         stationarity=stationarity, rounds=rounds, newton_iterations=newton, cg_iterations=cg,
                         w_products=products, added=added, removed=removed, wall_time=time.perf_counter() - t0,
-                        support=support_stats(Phi, a))
+                        support=support_stats(Phi, a), trace=np.asarray(trace, dtype=np.float64).reshape(-1, 5))
