@@ -44,7 +44,7 @@ from bench.meshes import require  # noqa: E402
 from bench.second_order import brockett_problem, cmm_problem, pymanopt_subprocess  # noqa: E402
 
 RETRACTIONS = ("cayley", "cholesky", "polar")
-DEFAULT_RETRACTION = stiefel.GeneralizedStiefel(np.ones(2), 1).retraction
+DEFAULT_RETRACTION = stiefel.GeneralizedStiefel(np.ones(2), 1).retraction_name
 
 #: pymanopt's CG on ``bench.second_order.PYMANOPT_PROBLEM``, with its per-iteration log
 PEER_CG = r'''

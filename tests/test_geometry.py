@@ -226,11 +226,11 @@ def test_pymanopt_and_manopt_names() -> None:
     X = S.random_point(jax.random.PRNGKey(0))
     Y = S.random_point(jax.random.PRNGKey(1))
     assert float(jnp.max(jnp.abs(S.zero_vector(X)))) == 0.0 and S.zero_vector(X).shape == X.shape
-    Z = S.random_tangent_vector(X, jax.random.PRNGKey(7))
+    Z = S.random_tangent_vector(jax.random.PRNGKey(7), X)
     np.testing.assert_array_equal(np.asarray(Z), np.asarray(S.random_tangent(jax.random.PRNGKey(7), X)))
     assert abs(float(S.norm(X, Z)) - 1.0) < 1e-12
     assert float(jnp.max(jnp.abs(S.proj(X, Z) - Z))) < 1e-12                              # tangent at X
-    W = S.random_tangent_vector(X, jax.random.PRNGKey(5))
+    W = S.random_tangent_vector(jax.random.PRNGKey(5), X)
     assert float(jnp.max(jnp.abs(W - Z))) > 1e-3
     T = S.transp(X, Y, Z)
     np.testing.assert_allclose(np.asarray(T), np.asarray(S.transport(Y, Z)), atol=0)

@@ -88,7 +88,7 @@ def test_sphere_and_stiefel_helpers():
     x = S.random_point(jax.random.PRNGKey(0))
     assert x.shape == (7, 1) and abs(float(jnp.sum(x * x)) - 1.0) <= 1e-14
     E = stiefel.sphere(4, np.array([1.0, 2.0, 3.0, 4.0]), retraction="periodic")
-    assert E.retraction == "periodic" and E.k == 1
+    assert E.retraction_name == "periodic" and E.k == 1
     with pytest.raises(stiefel.ShapeError):
         stiefel.sphere(5, np.ones(4))
     St = stiefel.stiefel(9, 3)

@@ -206,7 +206,7 @@ class CMMEnergy(eqx.Module):
         a sparse product per trial. Same value as ``F(manifold.retract(X, τη))`` up to
         rounding. Other retractions: None (the solver differentiates ``F ∘ R`` itself).
         """
-        if getattr(manifold, "retraction", None) != "cholesky" or X.ndim != 2:
+        if getattr(manifold, "retraction_name", None) != "cholesky" or X.ndim != 2:
             return None
         U = jnp.concatenate([X, eta], axis=1)
         k = X.shape[1]

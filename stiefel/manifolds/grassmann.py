@@ -34,6 +34,7 @@ from ..runtime.compilation import is_traced
 from ..errors import OutOfDomainError
 from .geodesics import expm
 from .manifold import GeneralizedStiefel
+from .names import transport_args
 
 __all__ = ["Grassmann", "sphere", "stiefel"]
 
@@ -75,7 +76,8 @@ class Grassmann(GeneralizedStiefel):
         """``Π_X(M⁻¹H − ξXᵀG)``."""
         return self.proj(X, self.op.solve(H) - xi @ (X.T @ G))
 
-    def transport(self, X_new: Point, Z: Point) -> Point:
+    def transport(self, X_new: Point, Z: Point, *pymanopt) -> Point:
+        X_new, Z = transport_args(X_new, Z, pymanopt)
         return self.proj(X_new, Z)
 
     def transport_pair(self, X_new: Point, Z1: Point, Z2: Point) -> tuple[Point, Point]:
@@ -123,12 +125,6 @@ class Grassmann(GeneralizedStiefel):
         G = R.T @ self.op.mv(R)
         sin = jnp.sqrt(jnp.clip(jnp.linalg.eigvalsh(0.5 * (G + G.T)), 0.0, 1.0))  # ascending
         return jnp.where(cos > 0.7, jnp.arcsin(sin), jnp.arccos(cos))
-
-    # the aliases of GeneralizedStiefel name its own functions: re-bound to the horizontal versions here
-    projection = proj
-    to_tangent_space = proj
-    euclidean_to_riemannian_gradient = egrad_to_rgrad
-    euclidean_to_riemannian_hessian = ehess_to_rhess
 
 
 def sphere(n: int, M=None, **options) -> GeneralizedStiefel:

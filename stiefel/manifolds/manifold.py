@@ -11,6 +11,7 @@ from jaxtyping import Array, Float, PRNGKeyArray
 from . import geodesics as _geodesics
 from ..errors import OffManifoldError, ShapeError, StiefelError
 from ..linalg.operators import IdentityOperator, LinearOperator, as_operator
+from .names import ManifoldNames, transport_args
 from .retractions import BLOCK_RETRACTIONS, RETRACTIONS, _inv_sqrt_spd
 from ..validation import check_full_rank, is_integer
 
@@ -30,7 +31,7 @@ def skew(B):
     return 0.5 * (B - B.T)
 
 
-class GeneralizedStiefel(eqx.Module):
+class GeneralizedStiefel(ManifoldNames, eqx.Module):
     """``{X : XᵀMX = I_k}`` for an SPD ``M`` (diagonal, dense or ``scipy.sparse``).
 
     Args:
@@ -48,13 +49,15 @@ class GeneralizedStiefel(eqx.Module):
       check: validate that M is SPD (raises ``NotSPDError``).
       dtype: dtype of the stored operator (default float64 when x64 is enabled).
 
-    Points are arrays of shape ``(n, k)``; all methods are pure and jittable.
+    Points are arrays of shape ``(n, k)``; all methods are pure and jittable. The chosen retraction's name is
+    ``retraction_name``; ``retraction(X, Z)``, ``retr`` and the other pymanopt/Manopt names are methods
+    (``stiefel.manifolds.names``).
     """
 
     op: LinearOperator
     k: int = eqx.field(static=True)
     metric: str = eqx.field(static=True)
-    retraction: str = eqx.field(static=True)
+    retraction_name: str = eqx.field(static=True)
 
     def __init__(self, M, k: int, *, metric: str = "euclidean", retraction: str = "polar",
                  check: bool = True, dtype=None, n: int | None = None):
@@ -83,7 +86,7 @@ class GeneralizedStiefel(eqx.Module):
         self.op = op
         self.k = int(k)
         self.metric = metric
-        self.retraction = retraction
+        self.retraction_name = retraction
 
     # --- sizes -------------------------------------------------------------------------------
     @property
@@ -157,10 +160,11 @@ class GeneralizedStiefel(eqx.Module):
 
     def retract(self, X: Point, Z: Point) -> Point:
         """``R_X(Z)`` with the manifold's retraction."""
-        return RETRACTIONS[self.retraction](self.op, X, Z)
+        return RETRACTIONS[self.retraction_name](self.op, X, Z)
 
-    def transport(self, X_new: Point, Z: Point) -> Point:
-        """Vector transport by projection onto ``T_{X_new}``."""
+    def transport(self, X_new: Point, Z: Point, *pymanopt) -> Point:
+        """Vector transport by projection onto ``T_{X_new}``; pymanopt's ``transport(X, X_new, Z)`` too."""
+        X_new, Z = transport_args(X_new, Z, pymanopt)
         return self.proj(X_new, Z)
 
     def transport_pair(self, X_new: Point, Z1: Point, Z2: Point) -> tuple[Point, Point]:
@@ -195,11 +199,6 @@ class GeneralizedStiefel(eqx.Module):
     def zero_vector(self, X: Point) -> Point:
         """The zero tangent vector at ``X`` (pymanopt's and Manopt's ``zero_vector``/``zerovec``)."""
         return jnp.zeros_like(X)
-
-    def random_tangent_vector(self, X: Point, key: PRNGKeyArray) -> Point:
-        """pymanopt's ``random_tangent_vector(point)`` with the key JAX needs: ``random_tangent(key, X)``
-        (use a key other than the one that made ``X``: the same Gaussian draw lies in span(X))."""
-        return self.random_tangent(key, X)
 
     def transp(self, X: Point, Y: Point, Z: Point) -> Point:
         """Manopt's ``transp(x1, x2, d)`` / pymanopt's ``transport(point_a, point_b, tangent_vector_a)``: the
@@ -246,11 +245,3 @@ class GeneralizedStiefel(eqx.Module):
                 f"{name} is off the manifold: max|XᵀMX − I| = {err:.3e} > {atol:.1e}; "
                 "use manifold.project_to_manifold(X) to move it onto the manifold"
             )
-
-    # pymanopt-style aliases, documented once (docs/tutorial.md, "Coming from pymanopt or Manopt").
-    projection = proj
-    to_tangent_space = proj
-    inner_product = inner
-    euclidean_to_riemannian_gradient = egrad_to_rgrad
-    euclidean_to_riemannian_hessian = ehess_to_rhess
-    retraction_map = retract

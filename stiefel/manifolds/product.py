@@ -29,6 +29,7 @@ from jaxtyping import Array, Float, PRNGKeyArray
 
 from ..errors import ParameterError, ShapeError
 from .manifold import GeneralizedStiefel
+from .names import ManifoldNames, transport_args
 
 __all__ = ["Product"]
 
@@ -39,7 +40,7 @@ def _sum(values):
     return functools.reduce(operator.add, values)
 
 
-class Product(eqx.Module):
+class Product(ManifoldNames, eqx.Module):
     """``S_1 × … × S_p`` (module docstring); points and tangent vectors are tuples of arrays.
 
     Args:
@@ -122,7 +123,8 @@ class Product(eqx.Module):
     def retract(self, X: Point, Z: Point) -> Point:
         return self._each("retract", X, Z)
 
-    def transport(self, X_new: Point, Z: Point) -> Point:
+    def transport(self, X_new: Point, Z: Point, *pymanopt) -> Point:
+        X_new, Z = transport_args(X_new, Z, pymanopt)
         return self._each("transport", X_new, Z)
 
     def transport_pair(self, X_new: Point, Z1: Point, Z2: Point) -> tuple[Point, Point]:
@@ -144,10 +146,6 @@ class Product(eqx.Module):
         Z = tuple(S.proj(x, jax.random.normal(k, x.shape, dtype=x.dtype)) for S, x, k in zip(self.factors, X, keys))
         scale = 1.0 / self.norm(X, Z)
         return tuple(scale * z for z in Z)
-
-    def random_tangent_vector(self, X: Point, key: PRNGKeyArray) -> Point:
-        """pymanopt's ``random_tangent_vector(point)`` with a key: ``random_tangent(key, X)``."""
-        return self.random_tangent(key, X)
 
     def zero_vector(self, X: Point) -> Point:
         return tuple(jnp.zeros_like(x) for x in X)
@@ -189,11 +187,3 @@ class Product(eqx.Module):
         self.check_shape(X, name=name)
         for i, (S, x) in enumerate(zip(self.factors, X)):
             S.check_point(x, atol=atol, name=f"{name}[{i}]")
-
-    # pymanopt-style aliases, as GeneralizedStiefel's.
-    projection = proj
-    to_tangent_space = proj
-    inner_product = inner
-    euclidean_to_riemannian_gradient = egrad_to_rgrad
-    euclidean_to_riemannian_hessian = ehess_to_rhess
-    retraction_map = retract
