@@ -62,7 +62,7 @@ from .derivatives.implicit import RiemannianImplicitAdjoint, riemannian_residual
 from .solvers.minimisers import RiemannianBB, RiemannianCG, RiemannianLBFGS
 from .solvers.tcg import TCGStop, truncated_cg
 from .solvers.trust_region import RiemannianTrustRegion
-from .errors import (NonFiniteError, NotSPDError, OffManifoldError, OutOfDomainError, ParameterError, RankDeficientError, ShapeError, SolverError, StiefelError)
+from .errors import (NonFiniteError, NotSPDError, ObjectiveSignatureError, OffManifoldError, OutOfDomainError, ParameterError, RankDeficientError, ShapeError, SolverError, StiefelError)
 from .solvers.linesearch import LineSearchResult, LineSearchStatus, along_curve, strong_wolfe
 from .manifolds.manifold import GeneralizedStiefel, skew, sym
 from .linalg.operators import DenseOperator, DiagonalOperator, IdentityOperator, LinearOperator, SparseOperator, as_operator

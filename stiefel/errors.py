@@ -38,3 +38,7 @@ class OutOfDomainError(StiefelError):
 
 class SolverError(StiefelError):
     """A solver ended with a bad status and ``throw=True`` was asked for."""
+
+
+class ObjectiveSignatureError(StiefelError):
+    """An objective's signature does not fit the call: ``F(X)``, or ``F(X, args)`` as ``optx.minimise`` calls it."""

@@ -26,6 +26,7 @@ from .driver import DEFAULT_INTERVAL, CallbackError, run_chunked
 from ..errors import StiefelError
 from ..derivatives.implicit import RiemannianImplicitAdjoint
 from ..manifolds.manifold import GeneralizedStiefel
+from .objective_form import takes_args
 from .minimisers import STALL_WINDOW_MAX, RiemannianBB, RiemannianCG, RiemannianLBFGS
 from .preconditioning import PRECONDITIONING_MODES, as_preconditioner
 from ..result import Result, Status
@@ -137,8 +138,10 @@ def solve(F: Callable, manifold: GeneralizedStiefel, X0, options: BlockOptions =
     if not isinstance(manifold, GeneralizedStiefel):
         raise StiefelError("manifold must be a stiefel.GeneralizedStiefel (for a stiefel.Product, call "
                            "optx.minimise with stiefel.RiemannianCG and friends)")
-    solver = solver_for(manifold, options, F=F, preconditioner=preconditioner, monitor=monitor)
-    out = _run(_NoArgs(F), solver, X0, None, options.max_iters, adjoint or RiemannianImplicitAdjoint())
+    with_args = takes_args(F, None)  # F(X), or an optimistix-style F(X, args) called with args = None
+    solver = solver_for(manifold, options, F=F, preconditioner=preconditioner, monitor=monitor, with_args=with_args)
+    fn = F if with_args else _NoArgs(F)
+    out = _run(fn, solver, X0, None, options.max_iters, adjoint or RiemannianImplicitAdjoint())
     X, value, gnorm, it, status, history, stats = out
     return Result(x=X, value=value, grad_norm=gnorm, iterations=it, status=status, history=history, stats=stats)
 
@@ -177,7 +180,8 @@ def minimize(
 
     Args:
       F: ``X (n, k) -> scalar``, a JAX-differentiable function (gradient by ``jax.grad``), or
-        ``F(X, args)`` when ``args`` is given. An objective may also define
+        ``F(X, args)`` as for ``optx.minimise`` (called with ``args``, None when not given; ``stiefel.solvers.
+        objective_form``: a signature that fits neither is an ``ObjectiveSignatureError`` at the call). An objective may also define
         ``F.line(manifold, X, η)`` (``F.line(manifold, X, η, args)`` with ``args``) returning
         ``τ ↦ (F(R_X(τη)), d/dτ)`` (or None) to evaluate line-search trials faster than
         through the retraction (``objectives.CMMEnergy`` does, for the Cholesky retraction).
@@ -262,9 +266,9 @@ def minimize(
                         max_move=float(max_move), bb_gamma=float(bb_gamma), precondition=precondition,
                         ftol=float(ftol), ftol_window=int(ftol_window), memory=int(memory))
     # tolerances, line-search constants and the stall window are traced leaves: no recompilation when they change
-    solver = solver_for(manifold, opts, F=F, preconditioner=P, monitor=monitor, with_args=args is not None,
-                        budget=budget)
-    fn = _NoArgs(F) if args is None else F
+    with_args = takes_args(F, args)
+    solver = solver_for(manifold, opts, F=F, preconditioner=P, monitor=monitor, with_args=with_args, budget=budget)
+    fn = F if with_args else _NoArgs(F)
     adjoint = adjoint if adjoint is not None else RiemannianImplicitAdjoint(throw=throw)
     if traced:  # inside jax.grad / jax.jvp / jit: no ahead-of-time timing, no host-side checks
         X, value, gnorm, it, status, history, stats = _run(fn, solver, X0, args, opts.max_iters, adjoint)
