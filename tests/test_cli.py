@@ -181,7 +181,8 @@ def test_compare_smoothings_subset(hand: Path, tmp_path: Path) -> None:
     assert main(["compare-smoothings", str(hand), "-k", "3", "--smoothings", "f3,f6", "--quiet", *FAST,
                  "--out", str(out)]) == 0
     csv = (out / "comparison.csv").read_text().splitlines()
-    assert csv[0].startswith("smoothing,name,c1_at_zero,status,objective,dirichlet,l1")
+    assert csv[0].startswith("smoothing,name,c1_at_zero,status,objective,smoothed_objective,dirichlet,l1,exact_zeros,"
+                             "l1_residual")
     assert [line.split(",")[0] for line in csv[1:]] == ["f3", "f6"]
     md = (out / "comparison.md").read_text()
     assert "| f6 | huber | True |" in md
@@ -189,6 +190,9 @@ def test_compare_smoothings_subset(hand: Path, tmp_path: Path) -> None:
     for r in rows:
         assert r["objective"] == pytest.approx(r["dirichlet"] + r["l1"])
         assert r["orthogonality"] < 1e-10
+        # finished by default: exact zeros, never above the smoothing's own answer, status from the residual
+        assert r["exact_zeros"] > 0 and r["objective"] <= r["smoothed_objective"] * (1 + 1e-12)
+        assert (r["status"] == "converged") == (r["l1_residual"] <= 1e-8)
     import matplotlib.image
 
     img = matplotlib.image.imread(out / "comparison.png")

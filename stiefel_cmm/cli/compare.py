@@ -20,8 +20,8 @@ from .run_dir import RunDir
 __all__ = ["cmd_compare", "match_modes"]
 
 
-_COLUMNS = ("smoothing", "name", "c1_at_zero", "status", "objective", "dirichlet", "l1", "sparsity_1e-3",
-            "orthogonality", "iterations", "time_s", "compile_s")
+_COLUMNS = ("smoothing", "name", "c1_at_zero", "status", "objective", "smoothed_objective", "dirichlet", "l1",
+            "exact_zeros", "l1_residual", "sparsity_1e-3", "orthogonality", "iterations", "time_s", "compile_s")
 
 
 def display_name(name: str) -> str:
@@ -75,8 +75,12 @@ def cmd_compare(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDi
         try:
             solver, passed = solver_from_args(args, args.method, name, runtime_smoothing=True)
             r = compressed_modes(lap, args.k, mu, solver=solver, weighting=args.weighting, seed=args.seed,
-                                 start="eigen", progress=bar, eigenpairs=pairs)
+                                 start="eigen", progress=bar, eigenpairs=pairs,
+                                 **({} if args.finish else {"finish": None}))
+            # smoothed_objective: the smoothing's own answer (before the finish; = objective with --no-finish)
             row.update(status=r.status, objective=r.objective, dirichlet=r.dirichlet, l1=r.l1,
+                       smoothed_objective=r.finish["objective_before"] if r.finish else r.objective,
+                       exact_zeros=r.exact_zeros, l1_residual=r.l1_residual,
                        **{"sparsity_1e-3": r.sparsity["1e-3"]}, orthogonality=r.orthogonality,
                        iterations=r.iterations, time_s=time.perf_counter() - t, compile_s=r.compile_time)
             totals["compile_s"] += r.compile_time
@@ -102,7 +106,8 @@ def cmd_compare(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDi
     summary.update(parameters={"k": args.k, "mu": _mu_record(spec, mu, pairs), "method": args.method,
                                "laplacian": _laplacian_text(args.weights, args.area),
                                "weighting": args.weighting, "start": "eigen",
-                               "gtol": GTOL if args.gtol is None else args.gtol, "max_iters": args.max_iters},
+                               "gtol": GTOL if args.gtol is None else args.gtol, "max_iters": args.max_iters,
+                               "finish": bool(args.finish)},
                    solver_options={k: v for k, v in passed.items() if k != "smoothing"},
                    mu=mu, results=rows)
     if interrupt is not None:

@@ -180,12 +180,12 @@ def add_cmm_options(p: argparse.ArgumentParser, *, single_smoothing: bool) -> No
         p.add_argument("--smoothing", type=checked(smoothing_name), default="f6", metavar="NAME",
                        help="ℓ1 smoothing by name or alias (f0 … f9; huber = f6, l1 = abs = f0, logcosh = f8, …: "
                             "objectives.energy.smoothings); default f6 (huber)")
-    if single_smoothing:
-        p.add_argument("--finish", action=argparse.BooleanOptionalAction, default=True,
-                       help="finish the modes on the exact ℓ1 problem on their identified support "
-                            "(objectives.SupportFinish; the default): exact zeros, the status and the ℓ1 stationarity "
-                            "residual in summary.json from it, the solver's own modes kept in modes.npz as "
-                            "smooth_modes; --no-finish: the smoothed solver's modes and status")
+    p.add_argument("--finish", action=argparse.BooleanOptionalAction, default=True,
+                   help="finish the modes on the exact ℓ1 problem on their identified support "
+                        "(objectives.SupportFinish; the default): exact zeros, the status and the ℓ1 stationarity "
+                        "residual from it, the solver's own modes kept as smooth_modes (compare-smoothings: each "
+                        "smoothing's objective before the finish in smoothed_objective); --no-finish: the smoothed "
+                        "solver's modes and status")
     p.add_argument("--eps", type=_positive_type, default=None,
                    help="smoothing parameter ε (default 1e-3; which of ε, δ a smoothing uses: objectives.energy.smoothings)")
     p.add_argument("--delta", type=_positive_type, default=None,
