@@ -25,7 +25,8 @@ and the first RPN-CG case).
     python -m bench exact                                     # generated meshes, ManPG n = 128, 256, RPN n = 64, 128
     python -m bench exact --all-shared --manpg 128 256 512 1024 2048 4096 --rpn 64 128 256 512
 
-Writes ``docs/benchmarks/exact.md`` and ``exact.json`` when every problem is done (atomically, notes kept).
+Writes ``docs/benchmarks/exact.md`` and ``exact.json`` after every problem (atomically, notes kept; the page says how
+many of the problems it holds), so an interrupted run keeps what it measured.
 """
 
 from __future__ import annotations
@@ -56,14 +57,9 @@ LOADS_NOT = ("cube_40k.obj",)  # bad input by design (non-manifold volume faces)
 
 
 def problems(args):
-    """Yield ``(label, kind, build)``; ``build()`` returns ``(W, a, k, mu, weighting, start)``."""
-    for spec in args.mesh:
-        def build(spec=spec):
-            m, _ = load_mesh(spec)
-            lap = mesh.laplacian(m)
-            return lap.W, lap.A.diagonal(), args.k, args.mu_factor * m.n_vertices, "uniform", "eigen"
-        yield spec, "mesh", build
-    for group, ns, rs, mus in (("manpg", args.manpg, args.manpg_r, args.manpg_mu), ("rpn", args.rpn, (5,), (0.1,))):
+    """Yield ``(label, kind, build)`` — RPN-CG's cases, ManPG's, then the meshes; ``build()`` returns
+    ``(W, a, k, mu, weighting, start)``."""
+    for group, ns, rs, mus in (("rpn", args.rpn, (5,), (0.1,)), ("manpg", args.manpg, args.manpg_r, args.manpg_mu)):
         for n in ns:
             for r in rs:
                 for mu in mus:
@@ -71,6 +67,12 @@ def problems(args):
                         W, a = manpg_problem(n)
                         return W, a, r, mu, "area", "random"
                     yield f"{group}:{n}:{r}:{mu}", group, build
+    for spec in args.mesh:
+        def build(spec=spec):
+            m, _ = load_mesh(spec)
+            lap = mesh.laplacian(m)
+            return lap.W, lap.A.diagonal(), args.k, args.mu_factor * m.n_vertices, "uniform", "eigen"
+        yield spec, "mesh", build
 
 
 def run_problem(label: str, kind: str, build, args) -> dict:
@@ -106,6 +108,7 @@ def _g(x, fmt=".3g"):
 
 def report(meta: dict, rows: list[dict], traced: list[str]) -> str:
     lines = ["# The exactly sparse default against ADMM and the previous default", "", *header_lines(meta),
+             f"* problems measured: {meta.get('problems_done', len(rows))}",
              f"* meshes: k = {meta['k']}, μ = {meta['mu_factor']}·n, uniform ℓ1 weights, eigenfunction start; "
              "ManPG / RPN-CG: μ‖X‖₁, random orthonormal start (seed 0)",
              f"* ADMM: `ADMMCMM(time_limit={meta['admm_time']})` with the default finish (as a user gets it)",
@@ -168,7 +171,8 @@ def main(argv=None) -> int:
     args = parse(argv)
     meta = run_meta("bench exact", argv, k=args.k, mu_factor=args.mu_factor, admm_time=args.admm_time)
     rows = []
-    for label, kind, build in problems(args):
+    todo = list(problems(args))
+    for i, (label, kind, build) in enumerate(todo):
         try:
             row = run_problem(label, kind, build, args)
         except Exception as e:  # noqa: BLE001 — a problem that fails is a row with its error; the others still run
@@ -176,10 +180,12 @@ def main(argv=None) -> int:
         rows.append(row)
         print({k: row.get(k) for k in ("problem", "n", "objective", "gap", "previous_gap", "status", "residual",
                                        "zeros", "total", "admm_total", "error") if k in row}, flush=True)
-    meshes = [r["problem"] for r in rows if r["kind"] == "mesh"][:3]
-    rpn = [r["problem"] for r in rows if r["kind"] == "rpn"][:1]
-    traced = args.trace if args.trace is not None else meshes + rpn
-    write_results(results_path(args.out, ".json"), results_path(args.out), meta, rows, report(meta, rows, traced))
+        # written after every problem (atomically): an interrupted run keeps what it measured, marked partial
+        meta["problems_done"] = f"{i + 1} of {len(todo)}"
+        meshes = [r["problem"] for r in rows if r["kind"] == "mesh"][:3]
+        rpn = [r["problem"] for r in rows if r["kind"] == "rpn"][:1]
+        traced = args.trace if args.trace is not None else meshes + rpn
+        write_results(results_path(args.out, ".json"), results_path(args.out), meta, rows, report(meta, rows, traced))
     return 0
 
 
