@@ -25,8 +25,8 @@ and the first RPN-CG case).
     python -m bench exact                                     # generated meshes, ManPG n = 128, 256, RPN n = 64, 128
     python -m bench exact --all-shared --manpg 128 256 512 1024 2048 4096 --rpn 64 128 256 512
 
-Writes ``docs/benchmarks/exact.md`` and ``exact.json`` after every problem (atomically, notes kept; the page says how
-many of the problems it holds), so an interrupted run keeps what it measured.
+Writes ``docs/benchmarks/exact.md`` and ``exact.json`` when every problem is done (atomically, notes kept): an
+interrupted run never replaces the committed page (the rows are printed as they come).
 """
 
 from __future__ import annotations
@@ -171,8 +171,7 @@ def main(argv=None) -> int:
     args = parse(argv)
     meta = run_meta("bench exact", argv, k=args.k, mu_factor=args.mu_factor, admm_time=args.admm_time)
     rows = []
-    todo = list(problems(args))
-    for i, (label, kind, build) in enumerate(todo):
+    for label, kind, build in problems(args):
         try:
             row = run_problem(label, kind, build, args)
         except Exception as e:  # noqa: BLE001 — a problem that fails is a row with its error; the others still run
@@ -180,12 +179,11 @@ def main(argv=None) -> int:
         rows.append(row)
         print({k: row.get(k) for k in ("problem", "n", "objective", "gap", "previous_gap", "status", "residual",
                                        "zeros", "total", "admm_total", "error") if k in row}, flush=True)
-        # written after every problem (atomically): an interrupted run keeps what it measured, marked partial
-        meta["problems_done"] = f"{i + 1} of {len(todo)}"
-        meshes = [r["problem"] for r in rows if r["kind"] == "mesh"][:3]
-        rpn = [r["problem"] for r in rows if r["kind"] == "rpn"][:1]
-        traced = args.trace if args.trace is not None else meshes + rpn
-        write_results(results_path(args.out, ".json"), results_path(args.out), meta, rows, report(meta, rows, traced))
+    meta["problems_done"] = f"{len(rows)} of {len(rows)}"
+    meshes = [r["problem"] for r in rows if r["kind"] == "mesh"][:3]
+    rpn = [r["problem"] for r in rows if r["kind"] == "rpn"][:1]
+    traced = args.trace if args.trace is not None else meshes + rpn
+    write_results(results_path(args.out, ".json"), results_path(args.out), meta, rows, report(meta, rows, traced))
     return 0
 
 

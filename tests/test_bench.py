@@ -74,7 +74,7 @@ def test_bench_meshes_resolve_without_shared(tmp_path, monkeypatch):
 
 
 #: benchmark -> its mesh option (a shared mesh name that a fresh clone does not have)
-MESH_OPTIONS = {"suite": "--mesh", "cmm": "--meshes", "batch": "--meshes", "precision": "--meshes",
+MESH_OPTIONS = {"suite": "--mesh", "exact": "--mesh", "cmm": "--meshes", "batch": "--meshes", "precision": "--meshes",
                 "bases": "--meshes", "peers": "--meshes", "second-order": "--meshes", "scaling": "--base",
                 "scaling-modes": "--base"}
 
@@ -329,3 +329,21 @@ def test_scaling_modes_writes_nothing_when_a_level_fails(tmp_path, monkeypatch, 
     assert scaling_modes.main(["--levels", "1", "2", "--out-json", str(out_json), "--out-md", str(out_md)]) == 1
     assert "level 1 failed (MemoryError: Unable to allocate 80 GiB); nothing written" in capsys.readouterr().err
     assert out_md.read_text() == "the committed page\n" and not out_json.exists()
+
+
+def test_exact_bench_report_states_gaps_status_and_the_finish_iterates():
+    """``bench exact``'s page: one row per problem with the gap to ADMM, the status and residual, an error row for a
+    failed problem, the summary line's counts, and the finish's iterates for the traced problem."""
+    from bench.exact import report  # noqa: PLC0415
+
+    meta = {"date": "2026-11-28 10:00 UTC", "machine": "x", "commit": "abc", "jax": "0", "scipy": "0", "numpy": "0",
+            "command": "python -m bench exact", "k": 10, "mu_factor": 0.01, "admm_time": 120.0, "problems_done": "2 of 2"}
+    row = dict(problem="rpn:64:5:0.1", kind="rpn", n=64, k=5, mu=0.1, objective=1.78, gap=2e-4, previous_gap=6e-4,
+               status="stalled", residual=3e-6, zeros=0.83, admm_status="converged", iterations=431, newton=9, cg=51,
+               compile=5.5, solve=0.3, total=6.0, admm_iterations=2058, admm_total=0.7, speed=0.11, speed_excluded=2.4,
+               trace=[[1.79, 5e-2, 5e-2, 56, 2], [1.78, 8e-13, 0.0, 56, 0]])
+    page = report(meta, [row, dict(problem="manpg:128:4:0.1", kind="manpg", error="ValueError: boom")], ["rpn:64:5:0.1"])
+    assert "| rpn:64:5:0.1 | 64 | 5 | 0.1 | 1.78 | +2.0e-04 | +6.0e-04 | stalled | 3.0e-06 |" in page
+    assert "| manpg:128:4:0.1 | error: ValueError: boom |" in page
+    assert "Converged (residual ≤ 1e-8): 0 of 1." in page and "at or below ADMM × (1 + 1e-4): 0 of 1" in page
+    assert "### The finish's iterates: rpn:64:5:0.1" in page and "| 1 | 1.78 | 8.0e-13 | 0.0e+00 | 56 | 0 |" in page
