@@ -17,8 +17,8 @@ M-inner product (lineax ``CG`` on ``M·Hess``, symmetric in the Frobenius produc
 the normal complement), preconditioned by the solver's ``P`` as ``Q P Qᵀ``. The tangent is
 ``Ẋ = ξ + XN`` with ``b = −∂_θ r[θ̇]``; reverse mode is JAX's transpose of this linear map.
 
-``invariant=True`` (objectives with ``F(XQ) = F(X)`` for orthogonal Q, e.g. ``tr(XᵀWX)``):
-Hess has the vertical null space ``{XΩ}``; the solve runs on the horizontal space
+Invariant objectives (``F(XQ) = F(X)`` for orthogonal Q, e.g. ``tr(XᵀWX)``; detected at the root by default,
+``invariant=True`` to assert it): Hess has the vertical null space ``{XΩ}``; the solve runs on the horizontal space
 ``Π(Z) = Z − XXᵀMZ`` and returns the least-norm tangent, which differentiates every
 invariant quantity (``XXᵀM``, traces, eigenvalues) exactly.
 
@@ -54,12 +54,12 @@ import lineax as lx
 import optimistix as optx
 
 from ..errors import ParameterError
-from ..manifolds.manifold import sym
+from ..manifolds.manifold import skew, sym
 from ..manifolds.product import Product
 from ..result import Status
 from ..validation import check_count, check_positive
 
-__all__ = ["RiemannianImplicitAdjoint", "riemannian_residual", "tangent_solve"]
+__all__ = ["RiemannianImplicitAdjoint", "riemannian_residual", "tangent_solve", "vertical_ratio", "INVARIANCE_RATIO"]
 
 
 def riemannian_residual(fn, manifold, X, args):
@@ -70,17 +70,43 @@ def riemannian_residual(fn, manifold, X, args):
     return manifold.op.solve(G) - X @ jnp.linalg.solve(K, sym(X.T @ G)) + 0.5 * X @ (K - eye)
 
 
+#: the objective counts as invariant under X → XQ when the Hessian's action on a vertical direction XΩ is at most
+#: this fraction of its action on a horizontal one (both unit M-norm): 0 for an invariant F up to the root's
+#: gradient (≈ gtol), O(1) for one with isolated minimisers (the README's Brockett cost: 0.3)
+INVARIANCE_RATIO = 1e-4
+
+
+def vertical_ratio(jac, manifold, X):
+    """``‖Hess[XΩ]‖ / ‖Hess[Z]‖`` at a root ``X`` (unit M-norm directions; Ω a fixed skew matrix, Z a fixed
+    horizontal one): ≈ 0 when ``F(XQ) = F(X)`` for orthogonal Q, whose Hessian vanishes on ``{XΩ}``."""
+    S = manifold
+    n, k = X.shape
+    if k == 1:  # no vertical directions: XΩ = 0
+        return jnp.asarray(1.0, X.dtype)
+    omega = skew(jnp.triu(jnp.ones((k, k), X.dtype), 1) + jnp.diag(jnp.arange(k, dtype=X.dtype)[1:], 1))
+    V = X @ omega
+    R = jnp.sin(jnp.arange(n * k, dtype=X.dtype).reshape(n, k) * 1.618) + 0.5  # deterministic, generic
+    Z = R - X @ (X.T @ S.op.mv(R))  # horizontal
+
+    def rel(D):
+        H = S.proj(X, jac(D))
+        return jnp.sqrt(jnp.sum(H * S.op.mv(H)) / jnp.sum(D * S.op.mv(D)))
+
+    return rel(V) / jnp.maximum(rel(Z), jnp.finfo(X.dtype).tiny)
+
+
 def tangent_solve(jac, manifold, X, b, *, invariant=False, preconditioner=None, tol=1e-10, max_steps=None):
     """Solve ``J[Ẋ] = b`` for the residual's Jacobian ``jac = Z ↦ J[Z]`` at a root ``X`` (module docstring).
 
-    Returns ``Ẋ`` (NaN where the adjoint CG failed). ``invariant``: least-norm solve on the
-    horizontal space; ``preconditioner``: ``Y ↦ PY`` with ``P ≈ Hess⁻¹M⁻¹`` (e.g. ``(W + σM)⁻¹``).
+    Returns ``Ẋ`` (NaN where the adjoint CG failed). ``invariant`` (a bool, or a traced boolean): least-norm solve
+    on the horizontal space; ``preconditioner``: ``Y ↦ PY`` with ``P ≈ Hess⁻¹M⁻¹`` (e.g. ``(W + σM)⁻¹``).
     """
     S = manifold
-    if invariant:
-        Q = lambda Z: Z - X @ (X.T @ S.op.mv(Z))  # noqa: E731
-    else:
-        Q = lambda Z: S.proj(X, Z)  # noqa: E731
+    w = jnp.asarray(invariant, X.dtype)  # 1: horizontal projection Z − X XᵀMZ; 0: tangent projection Z − X sym(XᵀMZ)
+
+    def Q(Z):
+        B = X.T @ S.op.mv(Z)
+        return Z - X @ (sym(B) + w * skew(B))
     N = sym(S.op.mv(X).T @ b)
     XN = X @ N
     rhs = S.op.mv(Q(b - jac(XN)))  # M·(tangent part): the Frobenius-symmetric form of Hess ξ = Q(…)
@@ -135,8 +161,11 @@ def _implicit_jvp(primals, tangents):
     # residual at the root (its gradient and, for sparse M, a host solve) followed by its derivative
     _, jac = jax.linearize(lambda Y: riemannian_residual(fn, S, Y, args), root)
     P = solver.preconditioner if adjoint.precondition else None
-    t_root = tangent_solve(jac, S, root, -r_dot, invariant=adjoint.invariant, preconditioner=P,
-                                tol=adjoint.tol, max_steps=adjoint.max_steps)
+    invariant = adjoint.invariant
+    if invariant is None:  # detected at the root: the Hessian vanishes on vertical directions
+        invariant = vertical_ratio(jac, S, root) <= INVARIANCE_RATIO
+    t_root = tangent_solve(jac, S, root, -r_dot, invariant=invariant, preconditioner=P,
+                           tol=adjoint.tol, max_steps=adjoint.max_steps)
     stats = residual[-1]
     ok = stats["status"] == Status.CONVERGED
     if adjoint.throw:
@@ -152,8 +181,10 @@ class RiemannianImplicitAdjoint(optx.AbstractAdjoint):
     """Implicit-function-theorem adjoint for the ``stiefel`` minimisers (module docstring).
 
     Args:
-      invariant: the objective is invariant under ``X → XQ`` (Q orthogonal): solve on the
-        horizontal space (least-norm derivative; exact for invariant quantities).
+      invariant: None (default): detected at the solution — when the Hessian vanishes on the vertical
+        directions ``XΩ`` (``vertical_ratio ≤ INVARIANCE_RATIO``) the objective is invariant under ``X → XQ`` and
+        the solve runs on the horizontal space (least-norm derivative; exact for invariant quantities), else on
+        the tangent space. True / False: that choice, without the test.
       precondition: use the solver's preconditioner in the adjoint CG.
       tol: relative tolerance of the adjoint CG (on the scaled right-hand side).
       max_steps: CG iterations (default: lineax's 10·nk).
@@ -162,7 +193,7 @@ class RiemannianImplicitAdjoint(optx.AbstractAdjoint):
     Not for a ``stiefel.Product`` (``ParameterError`` when the solve is set up).
     """
 
-    invariant: bool = eqx.field(static=True, default=False)
+    invariant: bool | None = eqx.field(static=True, default=None)
     precondition: bool = eqx.field(static=True, default=True)
     tol: float = eqx.field(static=True, default=1e-10)
     max_steps: int | None = eqx.field(static=True, default=None)

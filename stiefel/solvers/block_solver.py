@@ -221,7 +221,7 @@ def minimize(
         such tracing the solve is not timed separately (``wall_time = compile_time = 0``) and
         ``throw`` checks run inside the computation.
       adjoint: the ``optx`` adjoint (default ``RiemannianImplicitAdjoint(throw=throw)``; pass
-        ``RiemannianImplicitAdjoint(invariant=True)`` for objectives with ``F(XQ) = F(X)``).
+        ``RiemannianImplicitAdjoint(invariant=True)`` to assert ``F(XQ) = F(X)``; by default it is detected).
         A derivative through a solve that did not converge is NaN, or an error with ``throw``.
       budget: optional runtime limit ``0 ≤ budget ≤ max_iters`` (may be traced): warm-started stages
         sharing one total of iterations pass ``max_iters=total, budget=left`` and compile once; the
