@@ -4,9 +4,15 @@ The CLI (an application, not the library) turns the cache on before the first co
 ``--cache-dir DIR`` > ``$STIEFEL_CACHE_DIR`` > the user's cache directory (``platformdirs``, e.g.
 ``~/.cache/stiefel/jax`` on Linux); ``--no-cache`` (or ``STIEFEL_CACHE_DIR=off``) leaves it off. Every compilation is cached
 (also the small ones: the thresholds ``jax_persistent_cache_min_compile_time_secs`` and
-``jax_persistent_cache_min_entry_size_bytes`` are set to 0). A directory that cannot be created or
-written gives one warning line and the run goes on without the cache; an unreadable or corrupt
-entry is JAX's business: it warns and compiles again.
+``jax_persistent_cache_min_entry_size_bytes`` are set to 0). A directory that exists and can be read
+but not written (a read-only cache, e.g. one shared by an administrator) is used read-only, without a
+word: compiled executables and stored programs are loaded from it, and nothing is written (JAX's
+minimum compile time for writing is set to infinity; ``stiefel.runtime.program_cache`` finds the
+directory unwritable and keeps new programs in memory). A directory that cannot be created or read
+gives one warning line and the run goes on without the cache. A corrupt stored program is rejected
+by ``stiefel.runtime.program_cache`` (verified by key and SHA-256, counted in ``summary.json``'s
+``stored_programs``); an unreadable or corrupt XLA executable is JAX's business: it warns and
+compiles again.
 
 Library users turn the same cache on in their own programs with::
 
@@ -39,6 +45,11 @@ def default_dir() -> Path:
     return Path(user_cache_dir("stiefel", appauthor=False)) / "jax"
 
 
+def _readable(path: Path) -> bool:
+    """Whether ``path`` is a directory whose files can be listed and read."""
+    return path.is_dir() and os.access(path, os.R_OK | os.X_OK)
+
+
 def _writable(path: Path) -> str | None:
     """None when ``path`` exists (or was created) and a file can be written in it, else the reason."""
     try:
@@ -62,21 +73,22 @@ def _disable() -> None:
 
 
 def enable(cache_dir: Path | None, disabled: bool) -> tuple[str | None, str | None]:
-    """Turn JAX's persistent compilation cache on (before any compilation); return ``(directory used or
-    None, warning or None)``."""
+    """Turn JAX's persistent compilation cache on (before any compilation), read-only where the directory
+    cannot be written; return ``(directory used or None, warning or None)``."""
     if disabled or (cache_dir is None and os.environ.get(ENV, "").strip().lower() == "off"):
         _disable()
         return None, None
     path = Path(cache_dir).expanduser() if cache_dir is not None else default_dir()
     why = _writable(path)
-    if why is not None:
+    if why is not None and not _readable(path):
         _disable()
         return None, f"compilation cache {path} is not usable ({why}); running without it"
     import jax
     from jax.experimental.compilation_cache import compilation_cache
 
     jax.config.update("jax_compilation_cache_dir", str(path))
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    # read-only: JAX writes an executable only when its compilation took at least this long, i.e. never
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0 if why is None else float("inf"))
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
     compilation_cache.reset_cache()  # JAX decides once whether to use a cache: let it decide again (``main`` in-process)
     return str(path), None

@@ -6,13 +6,14 @@ both build on these; nothing heavy is imported at module level.
 
 
 import argparse
+import contextlib
 import json
 import signal
 import sys
 import time
 import warnings
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 from .options import DEFAULT_MU, StartFile, load_start
 from .outputs import PROG, MuSpec, parse_mu, stderr_line, to_jsonable, versions
@@ -103,9 +104,14 @@ def _check_k(k: int, n: int) -> None:
 
 
 def _program_counts() -> dict:
-    from stiefel.runtime.program_cache import STATS
+    """This process's solver programs (``stiefel.runtime.program_cache``): ``loaded`` from the store (key and
+    SHA-256 verified), ``rejected`` stored files (another program's, corrupt, an older format, unreadable by
+    JAX: traced again; ``rejected_reasons`` counts them by reason), ``traced`` (and exported), ``stored``
+    (written; 0 in a read-only cache) and ``reused`` from memory."""
+    from stiefel.runtime.program_cache import REJECTIONS, STATS
 
-    return {"loaded": STATS["loaded"], "stored": STATS["exported"], "reused": STATS["memory"]}
+    return {"loaded": STATS["loaded"], "rejected": STATS["rejected"], "traced": STATS["exported"],
+            "stored": STATS["stored"], "reused": STATS["memory"], "rejected_reasons": dict(sorted(REJECTIONS.items()))}
 
 
 def _summary_head(args: argparse.Namespace, argv: Sequence[str] | None, mesh_info: dict) -> dict:
@@ -146,36 +152,71 @@ def _picture(run: RunDir, name: str, fill: Callable[[Path], object]) -> str | No
 
 
 def _viewer(args: argparse.Namespace, run: RunDir, name: str, m: Any, fields: Any, names: list[str],
-            subtitles: list[str], title: str) -> dict | None:
-    """With ``--html``: stage the interactive viewer ``name`` (``stiefel_cmm.cli.viewer.write_viewer``); what it shows."""
+            subtitles: list[str], title: str, summary: dict | None = None) -> dict | None:
+    """With ``--html``: stage the interactive viewer ``name`` (``stiefel_cmm.cli.viewer.write_viewer``); what it shows.
+
+    ``summary``: what the run's ``summary.json`` will say of its result (``command``, ``diagnostics``,
+    ``interrupted``, ``best_effort``): its status is shown on the page (``stiefel_cmm.cli.viewer.run_status``)."""
     if not getattr(args, "html", False):
         return None
-    from .viewer import write_viewer
+    from .viewer import run_status, write_viewer
 
+    status, ok = run_status(summary) or (None, True)
     info: dict = {}
     run.write("html", name, lambda fh: info.update(write_viewer(fh, m.vertices, m.faces, fields, names, title=title,
-                                                                 subtitles=subtitles, up=args.up)))
+                                                                 subtitles=subtitles, up=args.up, status=status,
+                                                                 status_ok=ok)))
     return info
 
 
-def _interrupted_solve(args: argparse.Namespace, status: str) -> dict | None:
-    """For a solve that stopped on Ctrl-C/SIGTERM (status ``interrupted``): take the signal over from
-    ``stiefel_cmm.cli.main`` (the outputs are written, a second signal still aborts them) and describe it."""
+@contextlib.contextmanager
+def _solve_signals(args: argparse.Namespace, bar: Callable, *, soft: bool = True) -> Iterator[tuple[Callable, Any]]:
+    """``(progress, stop)`` for one solve: SIGINT and SIGTERM alike stop it and keep the iterate reached.
+
+    ``stop`` is the ``stiefel_cmm.cli.main.SoftStop`` of ``signals.soft_stop()`` (None outside the CLI's
+    ``main``); ``progress`` calls ``bar`` and, with ``soft``, arms it at the first report: from then on a signal
+    sets ``stop.event`` (the solver's ``stop=``, checked between chunks) instead of raising, so one that lands
+    outside the solver's loop (a compilation, a continuation round starting) still ends in the modes reached,
+    written. ``soft=False`` for solvers that catch the interrupt themselves between long steps
+    (``--method sequential``: one compiled solve per column) and for the μ search."""
     signals = getattr(args, "signals", None)
-    if status != "interrupted" or signals is None or not signals.received:
+    if signals is None:
+        yield bar, None
+        return
+    with signals.soft_stop() as stop:
+        def progress(info: Any) -> None:
+            if soft:
+                stop.arm()
+            bar(info)
+
+        yield progress, stop
+
+
+def _interrupted_solve(args: argparse.Namespace, status: str, stopped: bool = False) -> dict | None:
+    """For a solve that stopped on Ctrl-C/SIGTERM (status ``interrupted``, or ``stopped``: the signal set its
+    ``stop`` and the solve returned): take the signal over from ``stiefel_cmm.cli.main`` (the outputs are
+    written, a second signal still aborts them) and describe it."""
+    signals = getattr(args, "signals", None)
+    if signals is None or not signals.received or not (status == "interrupted" or stopped):
         return None
     signum = signals.received[-1]
     signals.received.clear()
     name = "SIGTERM" if signum == signal.SIGTERM else "SIGINT"
-    return {"signal": name, "exit_code": 143 if name == "SIGTERM" else 130,
-            "note": "the solve was stopped by the signal; the outputs hold the iterate it had reached"}
+    note = ("the solve was stopped by the signal; the outputs hold the iterate it had reached, not a converged "
+            "result" if status == "interrupted" else
+            f"the signal came as the solve was ending; the outputs are its complete result (status {status})")
+    return {"signal": name, "exit_code": 143 if name == "SIGTERM" else 130, "status": status, "note": note}
 
 
 def _exit_code(interrupt: dict | None) -> int:
     if interrupt is None:
         return 0
-    stderr_line(f"{PROG}: {'terminated' if interrupt['signal'] == 'SIGTERM' else 'interrupted'} during the solve; "
-                "the modes reached were written (status interrupted)")
+    word = "terminated" if interrupt["signal"] == "SIGTERM" else "interrupted"
+    if interrupt.get("status", "interrupted") == "interrupted":
+        stderr_line(f"{PROG}: {word} during the solve; the modes reached were written (status interrupted)")
+    else:
+        stderr_line(f"{PROG}: {word} as the solve ended; its complete result was written (status "
+                    f"{interrupt['status']})")
     return int(interrupt["exit_code"])
 
 
