@@ -11,11 +11,24 @@ of a minimiser under ``jit``/``vmap``) cannot be inspected and are returned unch
 * ``check_wolfe(c1, c2)`` — line-search constants ``0 < c1 < c2 < 1``;
 * ``check_finite(name, A)`` — no NaN/inf entries in a dense or ``scipy.sparse`` array;
 * ``check_full_rank(name, gram)`` — ``k`` columns independent, from their Gram matrix ``YᵀMY``.
+
+Inputs that may be traced (a differentiable function's parameters) go through the ``checked_*`` helpers,
+which return the value (unchanged, or carrying a run-time check) to be used in its place:
+
+* ``known_value(v)`` — the number of ``v`` when the host knows it: a concrete value, or a tracer that
+  carries one (the primal under ``jax.grad``/``jax.jvp`` outside ``jit``); None under ``jit``/``vmap``;
+* ``checked_number(name, v, ...)``, ``checked_finite(name, A)``, ``checked_entries(name, A, low=...)``,
+  ``checked_order(name_a, a, name_b, b, rule=...)`` — a known value is checked now (the error names the
+  parameter, the value and, for arrays, the first bad entry's index); a traced one gets ``eqx.error_if``,
+  which raises when the program runs (an ``EquinoxRuntimeError`` naming the parameter, under
+  ``jit``/``grad``/``vmap``): never a silent number.
 """
 
 from __future__ import annotations
 
+import equinox as eqx
 import jax
+import jax.numpy as jnp
 import numpy as np
 import scipy.sparse as sp
 from jaxtyping import Float
@@ -23,7 +36,8 @@ from jaxtyping import Float
 from .errors import NonFiniteError, ParameterError, RankDeficientError
 
 __all__ = ["INT32_MAX", "is_traced_value", "is_integer", "check_count", "check_number", "check_positive",
-           "check_nonnegative", "check_unit_interval", "check_wolfe", "check_finite", "check_full_rank"]
+           "check_nonnegative", "check_unit_interval", "check_wolfe", "check_finite", "check_full_rank",
+           "known_value", "checked_number", "checked_finite", "checked_entries", "checked_order"]
 
 #: the largest count that fits the solvers' int32 loop counters
 INT32_MAX = 2**31 - 1
@@ -164,3 +178,105 @@ def check_full_rank(name: str, gram: Float[np.ndarray, "k k"], *, metric: str = 
             f"{name} is rank-deficient in the {metric} inner product: numerical rank {rank} of k = {k} columns "
             f"(eigenvalues of {name}ᵀ{metric}{name} from {lam[0]:.3e} to {lam[-1]:.3e}; tolerance {tol:.1e}); "
             "give linearly independent start columns (e.g. no two equal or zero columns)")
+
+
+# --- inputs that may be traced ---------------------------------------------------------------------------
+_RUNTIME = "checked when the program runs: the value is traced"
+
+
+def known_value(value) -> np.ndarray | None:
+    """``value`` as a numpy array when the host knows its number: a concrete array or scalar, or a tracer
+    that carries its value (the primal of ``jax.grad``/``jax.jvp`` outside ``jit``); None when the number
+    exists only when the compiled program runs (under ``jit``/``vmap``) or ``value`` is no number."""
+    if is_traced_value(value):
+        try:
+            from jax._src.core import to_concrete_value  # not public; where absent, the run-time checks remain
+            value = to_concrete_value(value)
+        except Exception:  # noqa: BLE001  (a private API: any failure means not known on the host)
+            return None
+        if value is None:
+            return None
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError):  # not convertible: no number
+        return None
+    return arr if np.issubdtype(arr.dtype, np.number) or arr.dtype == np.bool_ else None
+
+
+def _traced_scalar(name: str, value, error) -> None:
+    dtype = jnp.result_type(value)
+    if np.ndim(value) != 0 or not (jnp.issubdtype(dtype, jnp.floating) or jnp.issubdtype(dtype, jnp.integer)):
+        raise error(f"{name} must be a real number, got a traced array of shape {tuple(np.shape(value))} "
+                    f"and dtype {dtype}")
+
+
+def checked_number(name: str, value, *, low: float | None = None, high: float | None = None,
+                   low_open: bool = False, high_open: bool = False, finite: bool = True,
+                   error: type[Exception] = ParameterError):
+    """``check_number`` for a value that may be traced; returns ``value`` (module docstring): known → checked
+    now (``error`` naming the value); traced → a real scalar now, its range when the program runs."""
+    known = known_value(value)
+    if known is not None:
+        check_number(name, known, low=low, high=high, low_open=low_open,
+                     high_open=high_open, finite=finite, error=error)
+        return value
+    if not is_traced_value(value):  # not a number at all: check_number names it
+        check_number(name, value, low=low, high=high, low_open=low_open, high_open=high_open, finite=finite,
+                     error=error)
+    _traced_scalar(name, value, error)
+    ok = ~jnp.isnan(value)
+    if finite:
+        ok = ok & jnp.isfinite(value)
+    if low is not None:
+        ok = ok & ((value > low) if low_open else (value >= low))
+    if high is not None:
+        ok = ok & ((value < high) if high_open else (value <= high))
+    bounds = _describe(low, high, low_open, high_open)
+    return eqx.error_if(value, ~ok, f"{name} must be a {'finite ' if finite else ''}number"
+                                    f"{' ' + bounds if bounds else ''} ({_RUNTIME})")
+
+
+def checked_finite(name: str, array, *, error: type[Exception] = NonFiniteError):
+    """``check_finite`` for an array that may be traced; returns ``array`` (module docstring). A known array's
+    error names the count and the first bad entry's index."""
+    if not is_traced_value(array):
+        check_finite(name, array, error=error)
+        return array
+    known = known_value(array)
+    if known is not None:
+        check_finite(name, known, error=error)
+        return array
+    return eqx.error_if(array, ~jnp.all(jnp.isfinite(array)), f"{name} has non-finite entries (NaN or inf) "
+                                                               f"({_RUNTIME}); clean the input")
+
+
+def checked_entries(name: str, array, *, low: float, low_open: bool = False, what: str = "",
+                    error: type[Exception] = ParameterError):
+    """Every entry of ``array`` ``≥ low`` (``> low`` when ``low_open``; NaN fails) for an array that may be
+    traced; returns ``array``. ``what`` follows the rule in the message (e.g. ``" (a mass diagonal)"``)."""
+    rule = f"{name} must have entries {'>' if low_open else '≥'} {low}{what}"
+    known = known_value(array)
+    if known is not None:
+        bad = ~((known > low) if low_open else (known >= low))
+        if bad.any():
+            first = tuple(int(i[0]) for i in np.nonzero(bad)) if known.ndim else ()
+            at = first[0] if len(first) == 1 else first
+            shown = f"{name}[{at}]" if known.ndim else name
+            raise error(f"{rule}; {int(bad.sum())} are not, e.g. {shown} = {known[first].item()!r}")
+        return array
+    if not is_traced_value(array):
+        return array
+    ok = jnp.all((array > low) if low_open else (array >= low))
+    return eqx.error_if(array, ~ok, f"{rule} ({_RUNTIME})")
+
+
+def checked_order(name_a: str, a, name_b: str, b, *, rule: str, error: type[Exception] = ParameterError):
+    """``a ≤ b`` for two options that may be traced; returns ``(a, b)``. Known: ``error("{name_a} = a exceeds
+    {name_b} = b; {rule}")`` now; traced: the check rides on ``b`` (``eqx.error_if``) and runs with the program."""
+    ka, kb = known_value(a), known_value(b)
+    if ka is not None and kb is not None:
+        if not float(ka) <= float(kb):
+            raise error(f"{name_a} = {float(ka):g} exceeds {name_b} = {float(kb):g}; {rule}")
+        return a, b
+    b = jnp.asarray(b)  # an array to thread the check on (b may be a Python number while a is traced)
+    return a, eqx.error_if(b, ~(jnp.asarray(a) <= b), f"{name_a} exceeds {name_b}; {rule} ({_RUNTIME})")

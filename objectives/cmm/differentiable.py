@@ -24,12 +24,16 @@ from typing import Callable, Sequence
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
+import scipy.sparse as sp
 from jax.experimental import sparse as jsparse
 from jaxtyping import Array, Float
 
 import stiefel
 from stiefel.manifolds.signs import canonical_signs
-from stiefel.validation import check_count, check_nonnegative, check_positive
+from stiefel.errors import NotSPDError, ShapeError
+from stiefel.validation import (check_count, check_finite, checked_entries, checked_finite, checked_number,
+                                known_value)
 
 from ..energy.energies import CMMEnergy, l1_weights
 from ..energy import smoothings as _smoothings
@@ -68,6 +72,61 @@ def _operator(W):
         return W
     raise TypeError("W must be an operator with .mv (stiefel.SparseOperator, mesh.weight_operator_jax(V, F)) "
                     f"or a jax.experimental.sparse.BCOO matrix (mesh.laplacian_jax), got {type(W).__name__}")
+
+
+def _operator_size(op) -> int | None:
+    try:
+        return int(op.shape[0]) if hasattr(op, "shape") else int(op.n)
+    except (AttributeError, NotImplementedError, TypeError, ValueError):  # no size known: mv's products will tell
+        return None
+
+
+def _checked_operator(op):
+    """``op`` with its floating-point arrays checked finite (``NonFiniteError`` naming ``W``, for a ``BCOO``
+    the first bad entry's (row, column); traced: when the program runs)."""
+    if isinstance(op, BCOOOperator):
+        data, idx = known_value(op.data), known_value(op.indices)
+        if data is not None and idx is not None:
+            check_finite("W", sp.coo_array((data, (idx[:, 0], idx[:, 1])), shape=op.shape))
+            return op
+        return eqx.tree_at(lambda o: o.data, op, checked_finite("W", op.data))
+    leaves, treedef = jax.tree_util.tree_flatten_with_path(op)
+    leaves = [checked_finite(f"W (its {jax.tree_util.keystr(path).lstrip('.')})", leaf)
+              if eqx.is_inexact_array(leaf) else leaf for path, leaf in leaves]
+    return jax.tree_util.tree_unflatten(treedef, leaves)
+
+
+def _checked_inputs(op, area, X0, weights, weighting):
+    """``(op, area, X0, w)`` checked where they enter ``cmm_solve``, shapes first: ``area (n,)``, ``W (n, n)``,
+    ``X0 (n, k)``, ``weights (n,)`` (``ShapeError`` naming the argument, its shape and the expected one); then values:
+    ``W``, ``area``, ``weights``, ``X0`` finite (``NonFiniteError``; W first, as its first bad row is near a bad
+    vertex while a normalised area is NaN everywhere), ``area > 0``, ``w ≥ 0``. Returned checked: use them."""
+    area = jnp.asarray(area)
+    if area.ndim != 1 or not (jnp.issubdtype(area.dtype, jnp.floating) or jnp.issubdtype(area.dtype, jnp.integer)):
+        raise ShapeError(f"area must be a real vector (n,), the lumped mass diagonal, got shape {area.shape} "
+                         f"and dtype {area.dtype}")
+    if jnp.issubdtype(area.dtype, jnp.integer):
+        area = area.astype(jnp.result_type(float))
+    n = area.shape[0]
+    size = _operator_size(op)
+    if size is not None and size != n:
+        raise ShapeError(f"W must be (n, n) = ({n}, {n}) with n = {n} the size of area, got ({size}, {size})")
+    shape = tuple(np.shape(X0))
+    if len(shape) != 2 or shape[0] != n or not 1 <= shape[1] <= n:
+        raise ShapeError(f"X0 must have shape (n, k) = ({n}, k) with 1 ≤ k ≤ {n} (n = {n}: the size of area), "
+                         f"got {shape}")
+    w = None if weights is None else jnp.asarray(weights, dtype=area.dtype)
+    if w is not None and w.shape != area.shape:
+        raise ShapeError(f"weights must have shape (n,) = {area.shape} (one per vertex, as area), got {w.shape}")
+    op = _checked_operator(op)
+    area = checked_entries("area", checked_finite("area", area), low=0, low_open=True,
+                           what=" (the lumped mass diagonal A of ΨᵀAΨ = I)", error=NotSPDError)
+    if w is None:
+        w = l1_weights(area, weighting)
+    else:
+        w = checked_entries("weights", checked_finite("weights", w), low=0, what=" (per-vertex ℓ1 weights)")
+    X0 = checked_finite("X0", jnp.asarray(X0, dtype=area.dtype))
+    return op, area, X0, w
 
 
 def cmm_solve(
@@ -114,22 +173,28 @@ def cmm_solve(
     Returns:
       ``(Ψ, result)``: the modes ``(n, k)`` (unsorted; differentiable; each column's largest-magnitude
       entry positive, ``stiefel.manifolds.signs``) and the last stage's ``stiefel.Result``.
+
+    Raises (where the input enters, naming it): ``ShapeError`` (``X0`` not ``(n, k)``, ``weights`` not ``(n,)``,
+    ``W`` not ``(n, n)``, with ``n`` the size of ``area``); ``NonFiniteError`` (a NaN/inf in ``area``, ``W``,
+    ``weights`` or ``X0``, e.g. from a NaN vertex upstream, with the first bad entry's index);
+    ``NotSPDError`` (``area ≤ 0``); ``ParameterError`` (``mu``, ``eps``, ``delta``, ``stages``, ``gtol``,
+    ``weights`` out of range). Values known on the host — concrete, or the primal under ``jax.grad`` — are
+    checked before anything is compiled; traced ones (under ``jit``/``vmap``) when the program runs, as an
+    ``EquinoxRuntimeError`` with the same naming (``stiefel.validation.checked_number`` and friends).
     """
     _smoothings.info(smoothing)  # validates the name
     max_iters = check_count("max_iters", max_iters)
-    check_nonnegative("gtol", gtol)
-    check_nonnegative("mu", mu)  # these three only when concrete (they may be traced)
-    check_positive("eps", eps)
+    # every input is checked where it enters: now when its value is known (concrete, or the primal under
+    # jax.grad), when the program runs when it is traced (eqx.error_if; stiefel.validation.checked_*)
+    gtol = checked_number("gtol", gtol, low=0)
+    mu = checked_number("mu", mu, low=0)
+    eps = checked_number("eps", eps, low=0, low_open=True)
     if delta is not None:
-        check_positive("delta", delta)
-    for i, width in enumerate(stages):
-        check_positive(f"stages[{i}]", width)
+        delta = checked_number("delta", delta, low=0, low_open=True)
+    stages = [checked_number(f"stages[{i}]", width, low=0, low_open=True) for i, width in enumerate(stages)]
     op = _operator(W)
-    area = jnp.asarray(area)
+    op, area, X0, w = _checked_inputs(op, area, X0, weights, weighting)
     k = X0.shape[1]
-    w = l1_weights(area, weighting) if weights is None else jnp.asarray(weights, dtype=area.dtype)
-    if w.shape != area.shape:
-        raise ValueError(f"weights must have shape {area.shape}, got {w.shape}")
     eps = jnp.asarray(eps, dtype=area.dtype)
     delta = eps if delta is None else jnp.asarray(delta, dtype=area.dtype)
     S = stiefel.GeneralizedStiefel(area, k, retraction="cholesky")

@@ -36,6 +36,14 @@ __all__ = ["Product"]
 Point = tuple[Float[Array, "n k"], ...]  # one (n_i, k_i) array per factor
 
 
+def _shape_of(S: GeneralizedStiefel) -> tuple:
+    """``(n, k)`` of a factor's points (``"n"`` for an identity metric built without ``n``)."""
+    try:
+        return (S.n, S.k)
+    except ShapeError:
+        return ("n", S.k)
+
+
 def _sum(values):
     return functools.reduce(operator.add, values)
 
@@ -172,12 +180,15 @@ class Product(ManifoldNames, eqx.Module):
         """Raise ``ShapeError`` unless ``X`` is a tuple with one ``(n_i, k_i)`` array per factor (host-side;
         shapes only, so it works on traced values)."""
         p = len(self.factors)
+        want = tuple(_shape_of(S) for S in self.factors)
         if not isinstance(X, tuple):
             hint = f"; pass tuple({name})" if isinstance(X, list) else ""
-            raise ShapeError(f"{name} must be a tuple of {p} arrays, one per factor of the Product, "
+            raise ShapeError(f"{name} must be a tuple of {p} arrays of shapes {want}, one per factor of the Product, "
                              f"got {type(X).__name__}{hint}")
         if len(X) != p:
-            raise ShapeError(f"{name} has {len(X)} components; the Product has {p} factors")
+            got = tuple(tuple(np.shape(x)) for x in X)
+            raise ShapeError(f"{name} has {len(X)} components; the Product has {p} factors: {name} must be a tuple of "
+                             f"shapes {want}, got {got}")
         for i, (S, x) in enumerate(zip(self.factors, X)):
             S.check_shape(x, name=f"{name}[{i}]")
 

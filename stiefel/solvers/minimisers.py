@@ -85,7 +85,7 @@ class _RiemannianMinimiser(optx.AbstractMinimiser):
 
     Fields (all scalars are runtime arrays):
       manifold: the ``GeneralizedStiefel`` (its metric, retraction and M), or a ``stiefel.Product`` of them
-        (points are tuples; ``ShapeError`` at ``init`` for a start of the wrong structure or shapes).
+        (points are tuples); ``ShapeError`` at ``init`` for a start of the wrong structure or shapes.
       rtol, atol: stop when ``‖grad F‖ ≤ atol + rtol·|F|`` (manifold metric).
       preconditioner: None, a callable ``Y ↦ PY`` (P SPD, e.g. ``op.solve`` of
         ``stiefel.shifted_inverse(W, M, σ)``) or a ``stiefel.PointPreconditioner`` (``P_X``, applied at the
@@ -147,8 +147,7 @@ class _RiemannianMinimiser(optx.AbstractMinimiser):
 
     # --- optimistix protocol -------------------------------------------------------------------
     def init(self, fn, y, args, options, f_struct, aux_struct, tags) -> State:
-        if isinstance(self.manifold, Product):
-            self.manifold.check_shape(y, name="y0")
+        self.manifold.check_shape(y, name="y0")  # where the start enters the solver (shapes only: works traced)
         return _steps.init_state(self, fn, y, args)
 
     def step(self, fn, y, args, options, state: State, tags):

@@ -52,7 +52,7 @@ from .preconditioning import at_point
 from ..manifolds.product import Product
 from ..result import History, Status
 from .tcg import TCGStop, truncated_cg
-from ..validation import check_count, check_nonnegative, check_number, check_positive, is_traced_value
+from ..validation import check_count, checked_number, checked_order, is_traced_value
 
 __all__ = ["RiemannianTrustRegion", "TRState", "HESSIANS"]
 
@@ -99,6 +99,11 @@ class RiemannianTrustRegion(optx.AbstractMinimiser):
       max_inner: inner iterations per outer one (default: the manifold dimension, at most 10⁶);
         kappa ∈ (0, 1), theta ≥ 0: the inner residual target ``‖r0‖ min(‖r0‖^θ, κ)``.
       monitor, history, budget: as in ``stiefel.RiemannianCG``.
+
+    Options are checked on construction (``ParameterError`` naming the option, its value and the rule; a
+    defaulted radius is named as one), including ``min_radius ≤ radius ≤ max_radius``; traced options when the
+    program runs (``eqx.error_if``, ``stiefel.validation.checked_number``). The start ``y0`` is checked against
+    the manifold's shape(s) in ``init`` (``ShapeError``).
     """
 
     manifold: GeneralizedStiefel | Product
@@ -124,32 +129,36 @@ class RiemannianTrustRegion(optx.AbstractMinimiser):
         if self.hessian not in HESSIANS:
             raise StiefelError(f"unknown hessian {self.hessian!r}; choose one of {HESSIANS}")
         S = self.manifold
+        # the radii: each in range, then min_radius ≤ radius ≤ max_radius (a default is named as one)
+        max_label, radius_label, min_label = "max_radius", "radius (initial trust-region radius)", "min_radius"
         if self.max_radius is None:
-            self.max_radius = S.typical_dist
-        check_positive("max_radius", self.max_radius)
+            self.max_radius, max_label = S.typical_dist, "max_radius (default: the manifold's typical_dist)"
+        self.max_radius = checked_number(max_label, self.max_radius, low=0, low_open=True)
         if self.radius is None:
-            self.radius = self.max_radius / 8.0
-        check_positive("radius (initial trust-region radius)", self.radius)
+            self.radius, radius_label = self.max_radius / 8.0, "radius (default: max_radius/8)"
+        self.radius = checked_number(radius_label, self.radius, low=0, low_open=True)
         if self.min_radius is None:
-            self.min_radius = 1e-12 * self.max_radius
-        check_nonnegative("min_radius", self.min_radius)
+            self.min_radius, min_label = 1e-12 * self.max_radius, "min_radius (default: 1e-12·max_radius)"
+        self.min_radius = checked_number(min_label, self.min_radius, low=0)
+        self.radius, self.max_radius, self.min_radius = map(_scalar, (self.radius, self.max_radius, self.min_radius))
+        rule = "the trust-region radii need min_radius ≤ radius ≤ max_radius"
+        self.min_radius, self.max_radius = checked_order(min_label, self.min_radius, max_label, self.max_radius,
+                                                         rule=rule)
+        self.radius, self.max_radius = checked_order(radius_label, self.radius, max_label, self.max_radius, rule=rule)
+        self.min_radius, self.radius = checked_order(min_label, self.min_radius, radius_label, self.radius, rule=rule)
         if self.max_inner is None:
             try:
                 self.max_inner = min(S.dim, 10 ** 6)
             except ShapeError:  # M = None without n
                 self.max_inner = 10 ** 6
         check_count("max_inner", self.max_inner)
-        self.radius, self.max_radius, self.min_radius = map(_scalar, (self.radius, self.max_radius, self.min_radius))
         self.max_inner = host_array(self.max_inner, np.int32) if not is_traced_value(self.max_inner) else self.max_inner
-        if not is_traced_value(self.radius) and not is_traced_value(self.max_radius):
-            if float(self.radius) > float(self.max_radius):
-                raise StiefelError(f"radius = {float(self.radius):g} exceeds max_radius = {float(self.max_radius):g}")
-        check_number("rho_prime", self.rho_prime, low=0.0, high=0.25, high_open=True)
-        check_nonnegative("rho_regularization", self.rho_regularization)
-        check_number("kappa", self.kappa, low=0.0, high=1.0, low_open=True, high_open=True)
-        check_nonnegative("theta", self.theta)
-        for name in ("rtol", "atol"):
-            check_nonnegative(name, getattr(self, name))
+        self.rho_prime = checked_number("rho_prime", self.rho_prime, low=0, high=0.25, high_open=True)
+        self.rho_regularization = checked_number("rho_regularization", self.rho_regularization, low=0)
+        self.kappa = checked_number("kappa", self.kappa, low=0, high=1.0, low_open=True, high_open=True)
+        self.theta = checked_number("theta", self.theta, low=0)
+        self.rtol = checked_number("rtol", self.rtol, low=0)
+        self.atol = checked_number("atol", self.atol, low=0)
         check_count("history", self.history, 0)
         self._probe_preconditioner()
 
@@ -218,8 +227,7 @@ class RiemannianTrustRegion(optx.AbstractMinimiser):
 
     # --- optimistix protocol ---------------------------------------------------------------------
     def init(self, fn, y, args, options, f_struct, aux_struct, tags) -> TRState:
-        if isinstance(self.manifold, Product):
-            self.manifold.check_shape(y, name="y0")
+        self.manifold.check_shape(y, name="y0")  # where the start enters the solver (shapes only: works traced)
         (F0, aux0), G0 = jax.value_and_grad(lambda X: fn(X, args), has_aux=True)(y)
         rg0 = self._rgrad(y, G0)
         gn0 = self._gnorm(y, G0, rg0)
