@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import errno
+import hashlib
 import json
 import os
 import re
@@ -315,6 +316,64 @@ def test_failed_runs_leave_the_previous_view(tmp_path: Path, monkeypatch: pytest
     assert sorted(p.name for p in out.iterdir()) == ["modes.npz", VIEW_NAME]
     with pytest.raises(ViewerError, match="directory of --output not found"):
         run_view(_args(out, "--output", str(tmp_path / "no" / "v.html")))
+
+
+def _with_summary(out: Path, kind: str = "modes", **extra: object) -> Path:
+    """A ``summary.json`` beside ``out/<kind>.npz`` as a run writes it: the npz listed with its size and SHA-256."""
+    import hashlib
+
+    data = (out / f"{kind}.npz").read_bytes()
+    doc = {"command": kind, "files": {"npz": {"name": f"{kind}.npz", "bytes": len(data),
+                                              "sha256": hashlib.sha256(data).hexdigest()}}, **extra}
+    (out / "summary.json").write_text(json.dumps(doc))
+    return out
+
+
+@pytest.mark.parametrize("case, match", [
+    ("changed", r"modes.npz does not match summary.json: its SHA-256 is [0-9a-f]{16}…, the run recorded "
+                r"[0-9a-f]{16}… .*the file changed after the run wrote it; rerun 'stiefel modes --out"),
+    ("missing", r"modes.npz is listed in summary.json but missing: rerun 'stiefel modes --out"),
+    ("compare", r"holds the outputs of 'stiefel compare-smoothings' \(summary.json\): nothing to view"),
+    ("json", r"summary.json cannot be read \(not valid JSON\)"),
+    ("unlisted", r"summary.json lists no modes.npz with its SHA-256"),
+])
+def test_run_view_checks_the_summary(tmp_path: Path, case: str, match: str) -> None:
+    out = _with_summary(_npz(tmp_path / "run"))
+    if case == "changed":
+        _npz(out, compressed_eigenvalues=np.array([0.5, 1.5, 2.6]))  # a valid npz, not the one the run wrote
+    elif case == "missing":
+        (out / "modes.npz").unlink()
+    elif case == "compare":
+        (out / "summary.json").write_text(json.dumps({"command": "compare-smoothings", "files": {}}))
+    elif case == "json":
+        (out / "summary.json").write_text("{not json")
+    elif case == "unlisted":
+        (out / "summary.json").write_text(json.dumps({"command": "modes", "files": {}}))
+    before = sorted(p.name for p in out.iterdir())
+    with pytest.raises(ViewerError, match=match) as e:
+        run_view(_args(out))
+    after = sorted(p.name for p in out.iterdir() if p.name != ".stiefel.lock")  # (the lock taken to read the run)
+    assert "\n" not in str(e.value) and after == before  # nothing written, no staging left
+
+
+def test_run_view_labels_the_status_and_lists_the_page(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    out = _with_summary(_npz(tmp_path / "run"), diagnostics={"status": "interrupted", "iterations": 12},
+                        interrupted={"signal": "SIGINT"})
+    assert run_view(_args(out)) == 0
+    captured = capsys.readouterr()
+    status = "INTERRUPTED by SIGINT after 12 iterations: the modes reached, not a converged result"
+    assert captured.err.strip() == f"stiefel view: warning: {out} holds no converged result; run status: {status}"
+    assert f"run status: {status}" in captured.out
+    page = (out / VIEW_NAME).read_text()
+    assert f"run status: {status}" in page and "<title>run: compressed manifold modes [INTERRUPTED]</title>" in page
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["files"]["view"]["sha256"] == hashlib.sha256(page.encode()).hexdigest()
+    assert summary["diagnostics"]["status"] == "interrupted"  # the run's record is kept as it was
+    # a converged run: the status on the page, nothing on stderr
+    _with_summary(_npz(tmp_path / "ok"), diagnostics={"status": "converged", "iterations": 7})
+    assert run_view(_args(tmp_path / "ok", "--quiet")) == 0
+    assert capsys.readouterr().err == ""
+    assert "run status: converged in 7 iterations" in (tmp_path / "ok" / VIEW_NAME).read_text()
 
 
 # ---------------------------------------------------------------------------- a real browser

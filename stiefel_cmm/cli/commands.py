@@ -15,15 +15,67 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 from .options import GTOL, METHODS, solver_from_args
-from .outputs import MuSpec, PartialColumns, to_jsonable, write_ply
+from .outputs import PROG, MuSpec, PartialColumns, stderr_line, to_jsonable, write_ply
 from .progress import SolveProgress
 from .run_dir import RunDir
 
-from .common import (CLIError, _Progress, _check_k, _exit_code, _finish, _interrupted_solve, _laplacian_text, _load, _mu_record, _picture, _resolve_mu, _start, _summary_head, _viewer)
+from .common import (CLIError, _Progress, _check_k, _exit_code, _finish, _interrupted_solve, _laplacian_text, _load,
+                     _mu_record, _picture, _resolve_mu, _solve_signals, _start, _summary_head, _viewer)
 
 __all__ = ["CLIError", "cmd_modes", "cmd_eigs", "cmd_compare", "outputs_of", "GTOL", "METHODS"]
 
 PARTIAL = "modes.partial.npz"
+#: ``--target-sparsity``: the sparsity measured (a key of ``CMMResult.sparsity``) and how close counts as reached
+#: (passed to ``select_mu`` and used to judge its answer)
+TARGET_THRESHOLD = "1e-3"
+TARGET_TOL = 0.02
+#: the exit code of a run whose outputs are written but fall short of what was asked (an unreachable target)
+EXIT_BEST_EFFORT = 3
+
+
+class _SearchInterrupted(BaseException):
+    """Raised by the μ search's ``stop`` once a signal came: ends ``select_mu`` (which would go on to its next
+    trial after an interrupted one); becomes the ``KeyboardInterrupt`` it stands for."""
+
+
+def _search_stop(stop: Any) -> Callable[[], bool] | None:
+    """``stop=`` for ``select_mu``'s solves: raises ``_SearchInterrupted`` once ``stop.event`` is set."""
+    if stop is None:
+        return None
+
+    def check() -> bool:
+        if stop.event.is_set():
+            raise _SearchInterrupted
+        return False
+
+    return check
+
+
+def _best_effort(target: float, res: Any, mu: float, trials: list, n: int) -> dict | None:
+    """None when ``select_mu`` reached ``target``; else what ``summary.json`` says (``best_effort``).
+
+    Reached: the sparsities of the solves bracket the target (some at or below it, some at or above) and the
+    answer is within ``TARGET_TOL`` of it. A search that never bracketed it spent its solves widening μ
+    towards a sparsity it cannot get (e.g. above ``1 − 1/n``: each mode keeps its largest entry), and its μ is
+    only the last one tried."""
+    reached = float(res.sparsity[TARGET_THRESHOLD])
+    seen = [float(t[1]) for t in trials]
+    low, high = min(seen), max(seen)
+    if low <= target <= high and abs(reached - target) <= TARGET_TOL:
+        return None
+    if high < target:
+        why = (f"all {len(trials)} solves stayed below it (the sparsest, {high:.6g}, up to "
+               f"μ = {max(t[0] for t in trials):.4g})")
+        if target > 1 - 1 / n:
+            why += f"; no modes can be sparser than 1 − 1/n = {1 - 1 / n:.6g} (each keeps its largest entry)"
+    elif low > target:
+        why = (f"all {len(trials)} solves stayed above it (the least sparse, {low:.6g}, down to "
+               f"μ = {min(t[0] for t in trials):.4g})")
+    else:
+        why = f"the closest of {len(trials)} solves has sparsity {reached:.6g}, not within ±{TARGET_TOL:g}"
+    return {"reason": f"target sparsity {target:g} not reached: {why}; written: μ = {mu:.4g}, sparsity {reached:.6g}",
+            "target_sparsity": target, "sparsity": reached, "mu": mu, "solves": len(trials),
+            "sparsity_range": [low, high], "exit_code": EXIT_BEST_EFFORT}
 
 
 def cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir) -> int:
@@ -66,23 +118,37 @@ def cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir)
         extra["callback"] = partial
     t = time.perf_counter()
     bar = SolveProgress(quiet=args.quiet, label=f"{args.method}")
-    trials = None
-    try:
-        if target is None:
-            res = compressed_modes(lap, args.k, mu, solver=solver, weighting=args.weighting, seed=args.seed,
-                                   start=start, progress=bar, **extra)
-        else:
-            mu, res, trials = select_mu(lap, args.k, args.target_sparsity, solver=solver, weighting=args.weighting,
-                                        seed=args.seed, start=start, progress=bar, **extra)
-            spec = MuSpec(f"{mu!r}", mu, "")
-            say(f"mu = {mu:.6g} gives sparsity {res.sparsity['1e-3']:.3f} ({len(trials)} solves)")
-    finally:
-        bar.close()
+    trials, best_effort = None, None
+    # SIGINT and SIGTERM alike: the solve stops at its next check and its modes are written (_solve_signals);
+    # a μ search (several solves) is abandoned instead, nothing written
+    soft = target is None and args.method != "sequential"
+    with _solve_signals(args, bar, soft=soft) as (progress, stop):
+        try:
+            if target is None:
+                res = compressed_modes(lap, args.k, mu, solver=solver, weighting=args.weighting, seed=args.seed,
+                                       start=start, progress=progress, stop=None if stop is None else stop.event,
+                                       **extra)
+            else:
+                mu, res, trials = select_mu(lap, args.k, args.target_sparsity, solver=solver,
+                                            weighting=args.weighting, seed=args.seed, start=start, progress=progress,
+                                            stop=_search_stop(stop), threshold=TARGET_THRESHOLD, tol=TARGET_TOL,
+                                            **extra)
+        except _SearchInterrupted:
+            raise KeyboardInterrupt from None
+        finally:
+            bar.close()
+    stopped = stop is not None and stop.event.is_set()
+    if target is not None:
+        if stopped:  # a trial was interrupted and select_mu went on: the search is not complete
+            raise KeyboardInterrupt
+        spec = MuSpec(f"{mu!r}", mu, "")
+        say(f"mu = {mu:.6g} gives sparsity {res.sparsity[TARGET_THRESHOLD]:.3f} ({len(trials)} solves)")
+        best_effort = _best_effort(args.target_sparsity, res, mu, trials, m.n_vertices)
     solve_total = time.perf_counter() - t
     timings.update(compile_s=float(res.compile_time), solve_s=float(res.wall_time),
                    setup_s=timings.pop("load_s") + timings.pop("local_functions_s", 0.0)
                    + max(0.0, solve_total - res.wall_time - res.compile_time))
-    interrupt = _interrupted_solve(args, res.status)
+    interrupt = _interrupted_solve(args, res.status, stopped)
     say(f"solved: status = {res.status}, iterations = {res.iterations}, objective = {res.objective:.6g}, "
         f"orthogonality = {res.orthogonality:.2e}")
     if res.finish is not None:
@@ -97,8 +163,15 @@ def cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir)
             "status": res.status, "exact_zeros": res.exact_zeros, "support_sizes": res.support_sizes,
             "support_areas": res.support_areas, "l1_residual": res.l1_residual, "finish": res.finish}
     params = dict(res.params)
-    params["mu"] = _mu_record(spec, mu, pairs) if target is None else {"target_sparsity": args.target_sparsity,
-                                                                 "value": mu, "trials": trials}
+    params["mu"] = _mu_record(spec, mu, pairs) if target is None else {
+        "target_sparsity": args.target_sparsity, "value": mu, "trials": trials, "threshold": TARGET_THRESHOLD,
+        "tolerance": TARGET_TOL, "reached": best_effort is None}
+    # what summary.json says of the result (the viewer page shows the same status)
+    outcome: dict[str, Any] = {"command": "modes", "diagnostics": diag}
+    if interrupt is not None:
+        outcome["interrupted"] = interrupt
+    if best_effort is not None:
+        outcome["best_effort"] = best_effort
     params["laplacian"] = _laplacian_text(args.weights, args.area)
     params["start"] = str(args.start)
     run.write("npz", "modes.npz", lambda fh: np.savez_compressed(
@@ -108,7 +181,7 @@ def cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir)
     run.write("ply", "modes.ply", lambda fh: write_ply(fh, m.vertices, m.faces, res.modes, ascii=args.ascii_ply))
     viewer = _viewer(args, run, "modes.html", m, res.modes, [f"mode {j}" for j in range(args.k)],
                      [f"λ̃ = {lam:.6g} · support {100 * s:.1f} %" for lam, s in zip(res.compressed_eigenvalues, support)],
-                     f"{mesh_info['source']}: compressed manifold modes (μ = {mu:.4g})")
+                     f"{mesh_info['source']}: compressed manifold modes (μ = {mu:.4g})", outcome)
     picture_error = None
     if not args.no_png:
         from .render import contact_sheet
@@ -121,8 +194,7 @@ def cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir)
     summary.update(parameters=params, solver_options=passed, mu=mu, diagnostics=diag,
                    compressed_eigenvalues=res.compressed_eigenvalues, timings=timings,
                    partial_results=_PARTIAL_NOTE if partial is None else "modes.partial.npz during the solve")
-    if interrupt is not None:
-        summary["interrupted"] = interrupt
+    summary.update({key: outcome[key] for key in ("interrupted", "best_effort") if key in outcome})
     if viewer is not None:
         summary["viewer"] = viewer
     if picture_error:
@@ -134,6 +206,11 @@ def cmd_modes(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDir)
     if "png" in run.files:
         say(f"wrote {out / 'modes.png'}")
     say(f"wrote {out / 'summary.json'}")
+    if interrupt is None and best_effort is not None:
+        stderr_line(f"{PROG}: error: {best_effort['reason']} as a best effort (summary.json: best_effort); choose a "
+                    f"target sparsity between {best_effort['sparsity_range'][0]:.4g} and "
+                    f"{best_effort['sparsity_range'][1]:.4g}")
+        return EXIT_BEST_EFFORT
     return _exit_code(interrupt)
 
 

@@ -12,7 +12,8 @@ import argparse
 import time
 from typing import Any, Sequence
 
-from .common import (_check_k, _exit_code, _finish, _interrupted_solve, _laplacian_text, _load, _mu_record, _picture, _Progress, _resolve_mu, _summary_head)
+from .common import (_check_k, _exit_code, _finish, _interrupted_solve, _laplacian_text, _load, _mu_record, _picture,
+                     _Progress, _resolve_mu, _solve_signals, _summary_head)
 from .options import GTOL, solver_from_args
 from .progress import SolveProgress
 from .run_dir import RunDir
@@ -74,9 +75,12 @@ def cmd_compare(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDi
         bar = SolveProgress(quiet=args.quiet, label=name)
         try:
             solver, passed = solver_from_args(args, args.method, name, runtime_smoothing=True)
-            r = compressed_modes(lap, args.k, mu, solver=solver, weighting=args.weighting, seed=args.seed,
-                                 start="eigen", progress=bar, eigenpairs=pairs,
-                                 **({} if args.finish else {"finish": None}))
+            # SIGINT/SIGTERM: this smoothing stops at its next check, its modes are kept, the rest are not run
+            with _solve_signals(args, bar, soft=args.method != "sequential") as (progress, stop):
+                r = compressed_modes(lap, args.k, mu, solver=solver, weighting=args.weighting, seed=args.seed,
+                                     start="eigen", progress=progress, stop=None if stop is None else stop.event,
+                                     eigenpairs=pairs, **({} if args.finish else {"finish": None}))
+            stopped = stop is not None and stop.event.is_set()
             # smoothed_objective: the smoothing's own answer (before the finish; = objective with --no-finish)
             row.update(status=r.status, objective=r.objective, dirichlet=r.dirichlet, l1=r.l1,
                        smoothed_objective=r.finish["objective_before"] if r.finish else r.objective,
@@ -86,7 +90,7 @@ def cmd_compare(args: argparse.Namespace, argv: Sequence[str] | None, run: RunDi
             totals["compile_s"] += r.compile_time
             totals["solve_s"] += r.wall_time
             solved.append((row, r.modes))
-            interrupt = _interrupted_solve(args, r.status)
+            interrupt = _interrupted_solve(args, r.status, stopped)
         except Exception as e:  # a smoothing that breaks the solver (f0) is reported, not fatal
             row.update(status=f"failed: {type(e).__name__}: {' '.join(str(e).split())[:120]}",
                        time_s=time.perf_counter() - t)

@@ -18,14 +18,16 @@ chosen method does not have is refused before any work. Progress goes to stdout,
 line per stage, and the solver's progress to stderr (a bar on a terminal, a line every
 2 s otherwise; none of either with ``--quiet``); ``--json`` prints exactly one JSON object
 (the summary) on stdout and nothing else there. ``stiefel view`` (``stiefel_cmm.cli.viewer``) writes an
-interactive, self-contained HTML viewer of a ``modes`` or ``eigs`` run; ``--html`` writes it with
-the run (``modes.html`` / ``eigs.html``).
+interactive, self-contained HTML viewer of a ``modes`` or ``eigs`` run — checked against the run's
+``summary.json`` (SHA-256 of the data file), its status on the page, the page listed in that summary;
+``--html`` writes it with the run (``modes.html`` / ``eigs.html``).
 
 Compilation is cached across runs in JAX's persistent cache (``stiefel_cmm.cli.cache``: ``--cache-dir``,
 ``$STIEFEL_CACHE_DIR``, ``--no-cache``); ``summary.json``'s ``timings`` separate ``compile_s``,
 ``solve_s``, ``setup_s`` (mesh, Laplacian, eigenbasis, factorisation), ``write_s`` and ``total_s``. Errors print one line
-``stiefel: error: …`` on stderr: exit code 2 for bad arguments, 1 for bad input
-(missing file, non-manifold mesh, …).
+``stiefel: error: …`` on stderr: exit code 2 for bad arguments (an empty ``--out`` included: ``Path("")``
+is the working directory), 1 for bad input (missing file, non-manifold mesh, …), 3 for a run written
+but short of what was asked (an unreachable ``--target-sparsity``, labelled ``best_effort``).
 
 ``--method`` picks the solver object of ``objectives.cmm.solvers`` (``block`` →
 ``BlockCMM``, ``sequential`` → ``SequentialCMM``, ``admm`` → ``ADMMCMM``,
@@ -41,10 +43,11 @@ claimed by one subcommand before anything is loaded or solved; files are staged 
 swapped in only when all are written, ``summary.json`` last, listing each file with its
 size and SHA-256. An interrupt or a write error leaves the previous run's outputs as they
 were. Ctrl-C prints ``stiefel: interrupted`` (exit 130), SIGTERM ``stiefel: terminated``
-(exit 143), without a traceback — also during the imports of JAX. An interrupt *during a solve*
-that reports progress (``--method block``) stops it at the next chunk of iterations: the modes
-reached are written, marked ``"status": "interrupted"`` in ``summary.json``, and the exit code is
-still 130 (143).
+(exit 143), without a traceback — also during the imports of JAX. The two take the same paths: once
+a solve has reported progress, the first signal sets its ``stop`` (``_Signals.soft_stop``) and the
+solver stops at its next check, wherever the signal landed (a compilation between continuation
+rounds included): the modes reached are written, marked ``"status": "interrupted"`` in
+``summary.json``, and the exit code is still 130 (143); a second signal aborts at once.
 
 Partial results: for ``--method sequential`` the finished columns are saved to
 ``DIR/modes.partial.npz`` as they complete (``compressed_modes(callback=)``, passed
@@ -62,6 +65,7 @@ import argparse
 import contextlib
 import gc
 import os
+import re
 import signal
 import sys
 import threading
@@ -70,6 +74,7 @@ from typing import Any, Callable, Iterator, NoReturn, Sequence
 
 # only light modules here: whatever the commands need is imported inside ``main``, where an interrupt is handled
 from .options import checked as _checked
+from .options import output_path as _output_path
 from .outputs import INT_MAX, PROG, bounded_int, stderr_line
 
 __all__ = ["main", "build_parser"]
@@ -84,7 +89,16 @@ def __getattr__(name: str) -> Any:
 
 
 class _Parser(argparse.ArgumentParser):
-    """ArgumentParser whose errors are one line on stderr and exit code 2 (no usage dump)."""
+    """ArgumentParser whose errors are one line on stderr and exit code 2 (no usage dump).
+
+    A value that starts with ``-`` and a digit or a point (``--mu -1λ``, ``--gtol -1e-3``, ``--mu -.5n``) is a
+    value, not an option: argparse's own pattern admits only plain negative numbers (``-1``, ``-.5``), so
+    ``--mu -1λ`` said "expected one argument" instead of reaching the μ parser (no option of ``stiefel``
+    starts with ``-`` and a digit)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = re.compile(r"^-\.?\d")
 
     def error(self, message: str) -> NoReturn:
         stderr_line(f"{PROG}: error: {message} (see '{self.prog} -h')")
@@ -105,11 +119,12 @@ def _common(p: argparse.ArgumentParser, k_default: int) -> None:
                    help="mesh file (OBJ/OFF/PLY/STL), or example:NAME for a generated example (bumpy, starfish, "
                         "torus, patch: mesh.examples); default: the built-in demo mesh (example:bumpy)")
     p.add_argument("-k", type=_positive_int, default=k_default, help=f"number of modes (default {k_default})")
-    p.add_argument("--out", type=Path, default=None, help="output directory (created; default: ./stiefel-<command>)")
+    p.add_argument("--out", type=_checked(_output_path("--out")), default=None,
+                   help="output directory (created; default: ./stiefel-<command>; an empty path is refused)")
     p.add_argument("--seed", type=_seed_type, default=0, help="random seed, 0 … 2³²−1 (default 0)")
     p.add_argument("--quiet", action="store_true", help="no progress lines or progress bar")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object on stdout")
-    p.add_argument("--cache-dir", type=Path, default=None,
+    p.add_argument("--cache-dir", type=_checked(_output_path("--cache-dir")), default=None,
                    help="JAX compilation cache (default: $STIEFEL_CACHE_DIR, else the user cache directory)")
     p.add_argument("--no-cache", action="store_true", help="compile without the persistent compilation cache")
     add_laplacian_options(p)
@@ -261,6 +276,17 @@ def _in_callback(frame: Any) -> bool:
     return False
 
 
+class SoftStop:
+    """What ``_Signals.soft_stop`` yields: ``event`` (a ``threading.Event``, set by SIGINT/SIGTERM) and ``arm()``."""
+
+    def __init__(self, armed: bool = False) -> None:
+        self.event, self.armed = threading.Event(), armed
+
+    def arm(self) -> None:
+        """From now on the first signal only sets ``event`` (see ``_Signals.soft_stop``)."""
+        self.armed = True
+
+
 class _Signals:
     """While the CLI runs, SIGINT and SIGTERM are remembered and raise ``KeyboardInterrupt``.
 
@@ -276,12 +302,19 @@ class _Signals:
         self.received: list[int] = []
         self.defer = True
         self._old: dict[int, Any] = {}
+        self._soft: SoftStop | None = None
 
     def _handler(self, signum: int, frame: Any) -> None:
         if signum not in self.received:
             self.received.append(signum)
         if self.defer:
             return
+        soft = self._soft
+        if soft is not None:
+            first = not soft.event.is_set()
+            soft.event.set()
+            if soft.armed and first:  # the solve stops at its next check and returns the iterate reached
+                return
         if _in_callback(frame):
             timer = threading.Timer(0.01, os.kill, (os.getpid(), signum))  # again once the callback is done
             timer.daemon = True
@@ -296,6 +329,21 @@ class _Signals:
             raise KeyboardInterrupt
 
     @contextlib.contextmanager
+    def soft_stop(self, *, armed: bool = False) -> Iterator[SoftStop]:
+        """While a solve runs: SIGINT and SIGTERM also set the ``SoftStop``'s ``event`` (the solve's ``stop=``).
+
+        Once ``arm()``-ed (the solve reported progress: there is an iterate worth keeping), the first signal only
+        sets it — the solver stops at its next check, also when the signal lands outside its loop (during a
+        compilation, between continuation rounds), where a ``KeyboardInterrupt`` would lose the iterate — and a
+        second signal raises as usual. Before, the signal raises at once (nothing reached yet to write)."""
+        stop = SoftStop(armed)
+        self._soft = stop
+        try:
+            yield stop
+        finally:
+            self._soft = None
+
+    @contextlib.contextmanager
     def installed(self) -> Iterator[_Signals]:
         if threading.current_thread() is threading.main_thread():
             self._old = {s: signal.signal(s, self._handler) for s in (signal.SIGINT, signal.SIGTERM)}
@@ -307,7 +355,8 @@ class _Signals:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the CLI; return the exit code (0 ok, 1 bad input, 2 bad arguments, 130 Ctrl-C, 143 SIGTERM).
+    """Run the CLI; return the exit code (0 ok, 1 bad input, 2 bad arguments, 3 written but short of what was
+    asked — an unreachable ``--target-sparsity`` —, 130 Ctrl-C, 143 SIGTERM).
 
     An interrupt at any point — the imports of JAX and the mesh code included — ends in one line on
     stderr and no traceback; a run's outputs are cleaned up on the way (``stiefel_cmm.cli.run_dir``). Called

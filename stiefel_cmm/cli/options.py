@@ -31,9 +31,9 @@ from typing import Any, Callable
 
 from .outputs import INT_MAX, PROG, bounded_int, parse_mu, stderr_line
 
-__all__ = ["checked", "add_laplacian_options", "add_cmm_options", "smoothing_name", "smoothing_list", "start_spec",
-           "load_start", "solver_from_args", "check_applicable", "DEFAULT_MU", "DEFAULT_WEIGHTING", "GTOL",
-           "METHODS", "StartFile"]
+__all__ = ["checked", "output_path", "add_laplacian_options", "add_cmm_options", "smoothing_name", "smoothing_list",
+           "start_spec", "load_start", "solver_from_args", "check_applicable", "DEFAULT_MU", "DEFAULT_WEIGHTING",
+           "GTOL", "METHODS", "StartFile"]
 
 GTOL = 1e-6
 SMOOTHING_NAMES = tuple(f"f{i}" for i in range(10))  # objectives.energy.smoothings.NAMES
@@ -107,6 +107,24 @@ class StartFile:
         return str(self.path)
 
 
+def output_path(option: str, example: str | None = None) -> Callable[[str], Path]:
+    """An argparse ``type=`` for a path the command writes (``--out``, ``--output``, ``--cache-dir``): refuses an
+    empty or blank path (``Path("")`` is the working directory: a run would write its files there) and a NUL byte.
+
+    ``example``: the end of the message (default ``"e.g. --out results (--out . is the working directory)"``)."""
+    example = example or f"e.g. {option} results ({option} . is the working directory)"
+
+    def parse(text: str) -> Path:
+        if not text.strip():
+            raise ValueError(f"the path is empty{'' if not text else ' (only whitespace)'}: give one, {example}")
+        if "\0" in text:
+            raise ValueError(f"the path {text!r} contains a NUL byte: give a path without it")
+        return Path(text)
+
+    parse.__name__ = "path"
+    return parse
+
+
 def start_spec(text: str) -> str | StartFile:
     """``eigen``, ``random`` or an existing ``.npy``/``.npz`` file."""
     if text in ("eigen", "random"):
@@ -119,25 +137,41 @@ def start_spec(text: str) -> str | StartFile:
     return StartFile(path)
 
 
+#: what an array of a refused dtype kind holds (``numpy.dtype.kind``), for ``load_start``'s message
+_NOT_REAL = {"b": "booleans", "c": "complex numbers", "U": "strings", "S": "byte strings", "O": "Python objects",
+             "M": "dates", "m": "time spans", "V": "records"}
+
+
 def load_start(spec: StartFile, n: int, k: int):
-    """The ``(n, k)`` float64 start read from ``spec``; ``ValueError`` naming the file and the shapes."""
+    """The ``(n, k)`` float64 start read from ``spec``; ``ValueError`` naming the file and the shapes.
+
+    Real numbers only (float or integer): booleans, strings and complex numbers are refused by their
+    dtype (a complex start would lose its imaginary part with nothing but a ``ComplexWarning``)."""
+    import zipfile
+
     import numpy as np
 
     try:
         data = np.load(spec.path, allow_pickle=False)
         if isinstance(data, np.ndarray):
-            X = data
+            X, keys = data, []
         else:
             with data:
                 keys = [key for key in ("modes", "eigenvectors") if key in data.files] or data.files
-                if len(keys) != 1 and keys[0] not in ("modes", "eigenvectors"):
-                    raise ValueError(f"start file {spec.path} holds {len(data.files)} arrays "
-                                     f"({', '.join(data.files)}); name one 'modes'")
-                X = data[keys[0]]
-    except (OSError, EOFError) as e:
-        raise ValueError(f"start file {spec.path} cannot be read: {e}") from None
+                X = data[keys[0]] if keys and (len(keys) == 1 or keys[0] in ("modes", "eigenvectors")) else None
+    except (OSError, EOFError, ValueError, zipfile.BadZipFile) as e:  # ValueError: e.g. a pickled object array
+        raise ValueError(f"start file {spec.path} cannot be read: {' '.join(str(e).split())}") from None
+    if X is None:
+        names = f" ({', '.join(keys)})" if keys else ""
+        raise ValueError(f"start file {spec.path} holds {len(keys)} arrays{names}; save the start as one array, or "
+                         "name it 'modes'")
     X = np.asarray(X)
-    if X.ndim != 2 or X.shape[0] != n or X.shape[1] < k or not np.issubdtype(X.dtype, np.number):
+    if X.dtype.kind not in "iuf":
+        what = _NOT_REAL.get(X.dtype.kind, "values that are not real numbers")
+        fix = "save its real part (X.real) instead" if X.dtype.kind == "c" else "save it as floats instead"
+        raise ValueError(f"start file {spec.path} holds {what} (dtype {X.dtype}, shape {X.shape}), not real numbers: "
+                         f"--start takes float or integer values; {fix}")
+    if X.ndim != 2 or X.shape[0] != n or X.shape[1] < k:
         raise ValueError(f"start file {spec.path} holds an array of shape {X.shape}; expected (n, k') = ({n}, ≥ {k}) "
                          "numbers: one row per vertex of the loaded mesh (after cleaning), at least k columns")
     X = np.asarray(X[:, :k], dtype=np.float64)

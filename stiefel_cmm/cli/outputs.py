@@ -23,6 +23,8 @@ PROG = "stiefel"
 INT_MAX = 2**31 - 1
 
 _MU_RE = re.compile(r"^\s*([0-9]*\.?[0-9]+(?:[eE][+-]?[0-9]+)?)\s*(n|λ|lambda|lam|)\s*$")
+#: a number followed by anything (for naming an unknown unit)
+_MU_NUMBER_RE = re.compile(r"^\s*([0-9]*\.?[0-9]+(?:[eE][+-]?[0-9]+)?)\s*(.*?)\s*$")
 
 
 class MuSpec:
@@ -59,8 +61,17 @@ def parse_mu(text: str) -> MuSpec:
     """
     m = _MU_RE.match(text)
     if m is None:
-        raise ValueError(f"invalid mu {text!r}: give a non-negative number (e.g. 5.2), a multiple of the vertex "
-                         "count (e.g. 0.01n) or of the k-th Laplacian eigenvalue λ_(k−1) (e.g. 2λ or 2lambda)")
+        forms = ("give a non-negative number (e.g. 5.2), a multiple of the vertex count (e.g. 0.01n) or of the k-th "
+                 "Laplacian eigenvalue λ_(k−1) (e.g. 2λ or 2lambda)")
+        stripped = text.strip()
+        if stripped.startswith("-") and _MU_RE.match(stripped[1:]):
+            raise ValueError(f"invalid mu {text!r}: μ must be ≥ 0 (it weighs the ℓ1 term; 0 gives the "
+                             f"eigenfunctions): {forms}")
+        number = _MU_NUMBER_RE.match(text)
+        if number is not None and number.group(2):
+            raise ValueError(f"invalid mu {text!r}: unknown unit {number.group(2)!r} after {number.group(1)}; "
+                             f"{forms}")
+        raise ValueError(f"invalid mu {text!r}: {forms}")
     value = float(m.group(1))
     if not math.isfinite(value):
         raise ValueError(f"invalid mu {text!r}: must be finite")

@@ -12,8 +12,12 @@
 * ``commit(summary)`` swaps the run in with SIGINT/SIGTERM held back: (a) the old ``summary.json``
   goes, (b) then the files of the old run that this run does not make, (c) the new files are
   renamed in, (d) ``summary.json`` comes last, its ``files`` listing exactly them:
-  ``{role: {"name", "bytes", "sha256"}}``. ``.stiefel-commit.json`` names every file involved
+  ``{role: {"name", "bytes", "sha256"}}``, and its ``other_files`` naming what else the folder holds
+  (files no stiefel run listed: left as they are). ``.stiefel-commit.json`` names every file involved
   while the commit runs, so a run killed there leaves the next run knowing what is stiefel's;
+* ``amend()`` instead adds the staged files to a finished run (``stiefel view DIR`` writes ``view.html``
+  this way): they are moved in and listed in its ``summary.json``, the run's files stay — and the next
+  run into the folder removes them with the rest of the old run at (b);
 * leaving removes the staging folder and releases the lock, whatever happened.
 
 Files that no stiefel run listed are never touched.
@@ -326,9 +330,10 @@ class RunDir:
 
         ``encode`` turns the summary into JSON text. Returns the summary as written.
         """
-        doc = {**summary, "files": {role: dict(rec) for role, rec in self.files.items()}}
         new = [rec["name"] for rec in self.files.values()]
         stale = sorted((self._old_names | set(self.owned)) - set(new))
+        doc = {**summary, "files": {role: dict(rec) for role, rec in self.files.items()},
+               "other_files": self._others(set(new), set(stale))}
         self.write_text(None, SUMMARY, encode(doc))
         journal = {"command": self.command, "names": sorted(self._old_names | set(self.owned) | set(new))}
         self.write_text(None, JOURNAL, json.dumps(journal) + "\n")
@@ -353,4 +358,66 @@ class RunDir:
             except OSError as e:
                 raise OutputError(f"could not finish writing {p}: {_reason(e)} ({SUMMARY} is missing until a "
                                   "run completes)") from None
+        return doc
+
+    def _others(self, new: set[str], stale: set[str]) -> list[str]:
+        """What the folder holds besides this run's files, ``summary.json``, hidden names and the stale files
+        the commit removes: files no stiefel run listed (they stay; ``summary.json`` names them)."""
+        try:
+            entries = sorted(os.scandir(self.path), key=lambda e: e.name)
+        except OSError:
+            return []
+        others = []
+        for e in entries:
+            if e.name.startswith(".") or e.name == SUMMARY or e.name in new:
+                continue
+            is_dir = e.is_dir(follow_symlinks=False)
+            if e.name in stale and not is_dir:
+                continue
+            others.append(e.name + ("/" if is_dir else ""))
+        return others
+
+    def amend(self, encode: Callable[[dict], str]) -> dict:
+        """Add the staged files to the finished run in the folder and list them in its ``summary.json``.
+
+        For a command that adds to a run (``stiefel view DIR``): the run's own files stay as they are; the
+        staged ones are moved in (with SIGINT/SIGTERM held back, ``.stiefel-commit.json`` naming them while it
+        runs) and ``summary.json`` is rewritten last with them under ``files``. A name that is hidden,
+        ``summary.json`` or a file the run lists under another role is refused (``OutputError``).
+        Returns the summary as written."""
+        summary = self._read(SUMMARY)
+        if summary is None:
+            raise OutputError(f"{self.path} holds no {SUMMARY}: there is no finished run to add files to")
+        files = summary.get("files") if isinstance(summary.get("files"), dict) else {}
+        for role, rec in self.files.items():
+            name = rec["name"]
+            if not _plain_name(name):
+                raise OutputError(f"{self.path / name} cannot be listed in {SUMMARY} (a hidden name or the summary "
+                                  "itself): choose another name")
+            taken = [r for r, old in files.items() if r != role and isinstance(old, dict) and old.get("name") == name]
+            if taken:
+                raise OutputError(f"{self.path / name} is the run's own file ({taken[0]} in {SUMMARY}): it is not "
+                                  "replaced; choose another name")
+        doc = {**summary, "files": {**files, **{role: dict(rec) for role, rec in self.files.items()}}}
+        new = [rec["name"] for rec in self.files.values()]
+        if isinstance(doc.get("other_files"), list):  # a name this run now lists is no longer another file
+            doc["other_files"] = [n for n in doc["other_files"] if n not in new]
+        self.write_text(None, SUMMARY, encode(doc))
+        journal = {"command": self.command, "names": sorted(self._old_names | set(new))}
+        self.write_text(None, JOURNAL, json.dumps(journal) + "\n")
+        staging, p = self._staging, self.path
+        assert staging is not None
+        if self.check is not None:
+            self.check()
+        with _hold_signals():
+            try:
+                os.replace(staging / JOURNAL, p / JOURNAL)
+                _fsync_dir(p)
+                for name in new:
+                    os.replace(staging / name, p / name)
+                os.replace(staging / SUMMARY, p / SUMMARY)
+                _fsync_dir(p)
+                (p / JOURNAL).unlink(missing_ok=True)
+            except OSError as e:
+                raise OutputError(f"could not finish writing {p}: {_reason(e)}") from None
         return doc

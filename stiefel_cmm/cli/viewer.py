@@ -10,8 +10,14 @@ so the shown values stay within each field's range; the page says so.
 
 ``add_parser``/``run_view`` are the ``stiefel view OUTDIR`` subcommand: it reads the ``modes.npz``
 of ``stiefel modes`` (or the ``eigs.npz`` of ``stiefel eigs``) and writes ``OUTDIR/view.html``
-atomically. Bad input raises ``ViewerError`` (one line naming the problem and the fix).
-numpy, plotly and scipy are imported inside the functions: importing this module is cheap.
+atomically. Where the run's ``summary.json`` is present it is read first: the data file is the one it
+lists, and one whose SHA-256 differs from the recorded one is refused; the run's status
+(``run_status``: converged, not converged, interrupted, a best effort) is shown on the page and, when
+it is not a converged result, on stderr. A page written into ``OUTDIR`` beside a ``summary.json`` is
+added to that summary (``stiefel_cmm.cli.run_dir.RunDir.amend``, under the directory's lock), so the next
+run into ``OUTDIR`` removes it with the other files of the old run. Bad input raises ``ViewerError``
+(one line naming the problem and the fix). numpy, plotly and scipy are imported inside the functions:
+importing this module is cheap.
 """
 
 from __future__ import annotations
@@ -20,68 +26,25 @@ import argparse
 import contextlib
 import html
 import io
+import json
 import operator
 import os
 import tempfile
 from pathlib import Path
 from typing import IO, Any, Mapping, Sequence
 
-from .outputs import INT_MAX, PROG, bounded_int
+from .outputs import INT_MAX, PROG, bounded_int, stderr_line
+from .view_run import (_SOURCES, _SUMMARY, ViewerError, _check, _read_summary, _run_directory, load_run,  # noqa: F401
+                       run_status)
 
-__all__ = ["ViewerError", "write_viewer", "decimate", "load_run", "add_parser", "run_view", "DEFAULT_MAX_FACES",
-           "VIEW_NAME"]
+__all__ = ["ViewerError", "write_viewer", "decimate", "load_run", "run_status", "add_parser", "run_view",
+           "DEFAULT_MAX_FACES", "VIEW_NAME"]
 
 #: meshes with more faces are decimated to this many for display
 DEFAULT_MAX_FACES = 80_000
 #: the file ``stiefel view OUTDIR`` writes in OUTDIR by default
 VIEW_NAME = "view.html"
-#: the run files ``stiefel view`` reads, first found wins: (file, fields array, values array, field label, value label)
-_SOURCES = (("modes.npz", "modes", "compressed_eigenvalues", "mode", "λ̃"),
-            ("eigs.npz", "eigenvectors", "eigenvalues", "eigenfunction", "λ"))
 _BACKGROUND = "white"
-
-
-class ViewerError(Exception):
-    """Bad input to the viewer (missing run files, inconsistent arrays); one line naming the fix."""
-
-
-# ---------------------------------------------------------------------------- checks and decimation
-
-
-def _check(vertices: Any, faces: Any, fields: Any, *, where: str, fix: str,
-           names: Sequence[str] = ("vertices", "faces", "fields")) -> tuple[Any, Any, Any]:
-    """``(vertices (n, 3) float64, faces (m, 3) int64, fields (n, k) float64)`` or ``ViewerError``.
-
-    ``where`` starts each message (e.g. the file), ``fix`` ends it; ``names`` name the three arrays."""
-    import numpy as np
-
-    def fail(problem: str) -> ViewerError:
-        return ViewerError(f"{where}{problem}: {fix}")
-
-    nv, nf, nfield = names
-    try:
-        v = np.asarray(vertices, dtype=np.float64)
-        f = np.asarray(faces)
-        u = np.asarray(fields, dtype=np.float64)
-    except (TypeError, ValueError) as e:
-        raise fail(f"arrays are not numeric ({e})") from None
-    if v.ndim != 2 or v.shape[1] != 3 or v.shape[0] < 3:
-        raise fail(f"{nv!r} has shape {v.shape}, expected (n, 3) with n >= 3")
-    if f.ndim != 2 or f.shape[1] != 3 or f.shape[0] < 1 or not np.issubdtype(f.dtype, np.integer):
-        raise fail(f"{nf!r} has shape {f.shape} and dtype {f.dtype}, expected integer (m, 3) with m >= 1")
-    u = u.reshape(-1, 1) if u.ndim == 1 else u
-    if u.ndim != 2 or u.shape[0] != v.shape[0] or u.shape[1] < 1:
-        raise fail(f"{nfield!r} has shape {u.shape}, expected (n, k) with n = {v.shape[0]} rows (one per vertex)")
-    f = f.astype(np.int64)
-    if f.min() < 0 or f.max() >= v.shape[0]:
-        bad = int(f.min()) if f.min() < 0 else int(f.max())
-        raise fail(f"{nf!r} index {bad} is out of range for {v.shape[0]} vertices")
-    for name, a in ((nv, v), (nfield, u)):
-        if not np.all(np.isfinite(a)):
-            raise fail(f"{name!r} has {int(np.size(a) - np.isfinite(a).sum())} non-finite values")
-    return v, f, u
-
-
 def decimate(vertices: Any, faces: Any, fields: Any, max_faces: int) -> tuple[Any, Any, Any]:
     """The mesh with at most ``max_faces`` faces: ``(vertices (n', 3), faces (m', 3), fields (n', k))``.
 
@@ -118,7 +81,7 @@ def _spec(a: Any, dtype: str) -> dict:
 
 
 def _figure(v: Any, f: Any, u: Any, limits: Any, names: Sequence[str], subtitles: Sequence[str], title: str,
-            note: str, camera: Mapping | None) -> Any:
+            note: str, camera: Mapping | None, status: str | None = None, status_ok: bool = True) -> Any:
     """The plotly figure: one ``Mesh3d`` coloured by field 0, a menu restyling it to field j."""
     import plotly.graph_objects as go
 
@@ -152,6 +115,13 @@ def _figure(v: Any, f: Any, u: Any, limits: Any, names: Sequence[str], subtitles
                       "y": 0.99, "yanchor": "top"}],
         annotations=[{"text": html.escape(note), "showarrow": False, "xref": "paper", "yref": "paper",
                       "x": 0.01, "y": 0.0, "xanchor": "left", "yanchor": "bottom", "font": {"size": 12}}])
+    if status is not None:  # the run's status, top right: boxed in red when the result is not a converged one
+        colour = "#2e7d32" if status_ok else "#b00020"
+        fig.add_annotation(text=html.escape(f"run status: {status}"), showarrow=False, xref="paper", yref="paper",
+                           x=0.99, y=0.99, xanchor="right", yanchor="top", align="right",
+                           font={"size": 13 if status_ok else 15, "color": colour},
+                           bordercolor=colour, borderwidth=0 if status_ok else 2, borderpad=4,
+                           bgcolor="rgba(255,255,255,0.85)")
     return fig
 
 
@@ -205,7 +175,8 @@ def default_camera(vertices: Any, faces: Any, up: str | None = None) -> dict:
 
 def write_viewer(target: str | os.PathLike | IO, vertices: Any, faces: Any, fields: Any, names: Sequence[str], *,
                  title: str, subtitles: Sequence[str] | None = None, max_faces: int = DEFAULT_MAX_FACES,
-                 camera: Mapping | None = None, up: str | None = None) -> dict:
+                 camera: Mapping | None = None, up: str | None = None, status: str | None = None,
+                 status_ok: bool = True) -> dict:
     """Write the interactive viewer of ``fields`` on the mesh as one self-contained HTML file.
 
     target: a path (written atomically: temporary file, fsync, rename) or an open binary or text file.
@@ -213,7 +184,8 @@ def write_viewer(target: str | os.PathLike | IO, vertices: Any, faces: Any, fiel
     subtitles: k texts shown under the title with the field (e.g. ``"λ̃ = 0.12"``); meshes with more
     than ``max_faces`` faces are decimated for display; camera: a plotly ``scene.camera`` dict
     (e.g. ``{"eye": {"x": 0, "y": 0, "z": 2}, "up": {"x": 0, "y": 1, "z": 0}}``), default
-    ``default_camera(vertices, faces, up)`` (``up``: as the contact sheet's ``--up``).
+    ``default_camera(vertices, faces, up)`` (``up``: as the contact sheet's ``--up``); status: the run's status
+    (``run_status``), shown at the top right, in a red box when ``status_ok`` is false.
     Returns ``{"vertices", "faces"`` (shown), ``"decimated", "original_vertices", "original_faces", "bytes"}``.
     Raises ``ViewerError`` for inconsistent arrays or labels.
     """
@@ -240,7 +212,8 @@ def write_viewer(target: str | os.PathLike | IO, vertices: Any, faces: Any, fiel
             else f"{len(v)} vertices, {len(f)} faces")
     if camera is None:
         camera = default_camera(v, f, up)
-    page = _page(_figure(v2, f2, u2, limits.tolist(), names, subtitles, title, note, camera), title)
+    page = _page(_figure(v2, f2, u2, limits.tolist(), names, subtitles, title, note, camera, status, status_ok),
+                 title if status_ok or status is None else f"{title} [{status.split(' ')[0]}]")
     data = page.encode("utf-8")
     if isinstance(target, (str, os.PathLike)):
         _write_atomic(Path(target), data)
@@ -253,49 +226,6 @@ def write_viewer(target: str | os.PathLike | IO, vertices: Any, faces: Any, fiel
 
 
 # ---------------------------------------------------------------------------- stiefel view
-
-
-def load_run(outdir: str | os.PathLike) -> dict:
-    """Read a run directory of ``stiefel modes`` (``modes.npz``, preferred) or ``stiefel eigs`` (``eigs.npz``).
-
-    Returns ``{"source": Path, "vertices" (n, 3), "faces" (m, 3), "fields" (n, k), "names": [k],
-    "subtitles": [k]}``; raises ``ViewerError`` naming the problem and the fix."""
-    import zipfile
-
-    import numpy as np
-
-    out = Path(outdir)
-    hint = "give the --out directory of 'stiefel modes' or 'stiefel eigs'"
-    if not out.exists():
-        raise ViewerError(f"run directory not found: {out}: {hint}")
-    if not out.is_dir():
-        raise ViewerError(f"not a directory: {out}: {hint}")
-    found = [s for s in _SOURCES if (out / s[0]).is_file()]
-    if not found:
-        raise ViewerError(f"no modes.npz or eigs.npz in {out}: run 'stiefel modes --out {out}' "
-                          f"or 'stiefel eigs --out {out}' first")
-    fname, key, values_key, label, symbol = found[0]
-    path, fix = out / fname, f"rerun 'stiefel {fname.split('.')[0]} --out {out}'"
-    try:
-        with np.load(path, allow_pickle=False) as npz:
-            missing = [a for a in ("vertices", "faces", key) if a not in npz.files]
-            if missing:
-                raise ViewerError(f"{path} lacks the array(s) {', '.join(map(repr, missing))}: {fix}")
-            arrays = {a: npz[a] for a in ("vertices", "faces", key)}
-            values = npz[values_key] if values_key in npz.files else None
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
-        raise ViewerError(f"{path} is not a readable npz file ({type(e).__name__}: {e}): {fix}") from None
-    v, f, u = _check(arrays["vertices"], arrays["faces"], arrays[key], where=f"{path}: ", fix=fix,
-                     names=("vertices", "faces", key))
-    k = u.shape[1]
-    subtitles = [""] * k
-    if values is not None:
-        values = np.asarray(values).reshape(-1)
-        if values.shape != (k,) or not np.issubdtype(values.dtype, np.number):
-            raise ViewerError(f"{path}: {values_key!r} has shape {values.shape}, expected ({k},): {fix}")
-        subtitles = [f"{symbol} = {float(x):.6g}" for x in values]
-    return {"source": path, "vertices": v, "faces": f, "fields": u, "names": [f"{label} {j}" for j in range(k)],
-            "subtitles": subtitles}
 
 
 def _max_faces(text: str) -> int:
@@ -311,14 +241,24 @@ def _up(text: str) -> str | None:
     return check_up(text)
 
 
+def _path(option: str, example: str) -> Any:
+    from .options import checked, output_path
+
+    return checked(output_path(option, example))
+
+
 def add_parser(sub: Any) -> argparse.ArgumentParser:
     """Add the ``view`` subcommand to an argparse subparsers object; return its parser."""
     p = sub.add_parser("view", help="interactive HTML viewer (one self-contained file) of a modes/eigs run",
                        description="Write OUTDIR/view.html: the mesh of a 'stiefel modes' (modes.npz) or "
-                                   "'stiefel eigs' (eigs.npz) run coloured by a chosen mode; opens offline.")
-    p.add_argument("outdir", type=Path, metavar="OUTDIR",
+                                   "'stiefel eigs' (eigs.npz) run coloured by a chosen mode; opens offline. "
+                                   "The run's summary.json, when present, is checked (the data file's SHA-256) "
+                                   "and its status shown; the page is listed in it.")
+    p.add_argument("outdir", type=_path("OUTDIR", "e.g. stiefel view results (stiefel view . for the working directory)"),
+                   metavar="OUTDIR",
                    help="the --out directory of 'stiefel modes' or 'stiefel eigs'")
-    p.add_argument("--output", "-o", type=Path, default=None, help=f"HTML file to write (default: OUTDIR/{VIEW_NAME})")
+    p.add_argument("--output", "-o", type=_path("--output", "e.g. --output view.html"), default=None,
+                   help=f"HTML file to write (default: OUTDIR/{VIEW_NAME})")
     p.add_argument("--title", default=None, help="page title (default: the run directory's name and the kind of run)")
     p.add_argument("--max-faces", type=_max_faces, default=DEFAULT_MAX_FACES,
                    help=f"decimate larger meshes to this many faces for display (default {DEFAULT_MAX_FACES})")
@@ -328,21 +268,68 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     return p
 
 
+def _inside(target: Path, outdir: Path) -> bool:
+    """Whether ``target`` is a file directly in ``outdir`` (the same folder, however written)."""
+    try:
+        return target.parent.resolve() == outdir.resolve()
+    except OSError:
+        return False
+
+
+def _encode(doc: dict) -> str:
+    return json.dumps(doc, indent=2, ensure_ascii=False) + "\n"
+
+
 def run_view(args: argparse.Namespace) -> int:
-    """``stiefel view``: read ``args.outdir``, write the viewer (``args.output`` or ``OUTDIR/view.html``); 0."""
-    run = load_run(args.outdir)
-    target = Path(args.output) if args.output is not None else Path(args.outdir) / VIEW_NAME
+    """``stiefel view``: read ``args.outdir``, write the viewer (``args.output`` or ``OUTDIR/view.html``); 0.
+
+    A run that is not a converged result (``run_status``) is labelled on the page and named on stderr."""
+    outdir = _run_directory(args.outdir)
+    target = Path(args.output) if args.output is not None else outdir / VIEW_NAME
     if not target.parent.is_dir():
         raise ViewerError(f"directory of --output not found: {target.parent}: create it or choose another file")
-    kind = "compressed manifold modes" if run["source"].name == "modes.npz" else "Laplacian eigenfunctions"
-    title = args.title if args.title is not None else f"{Path(args.outdir).resolve().name}: {kind}"
-    try:
-        info = write_viewer(target, run["vertices"], run["faces"], run["fields"], run["names"], title=title,
-                            subtitles=run["subtitles"], max_faces=args.max_faces, up=getattr(args, "up", None))
-    except OSError as e:
-        raise ViewerError(f"cannot write {target}: {e.strerror or e}: choose another --output") from None
+    info: dict = {}
+
+    def write(dest: Any, run: dict) -> None:
+        kind = "compressed manifold modes" if run["source"].name == "modes.npz" else "Laplacian eigenfunctions"
+        title = args.title if args.title is not None else f"{outdir.resolve().name}: {kind}"
+        text, ok = run["status"] if run["status"] is not None else (None, True)
+        info.update(write_viewer(dest, run["vertices"], run["faces"], run["fields"], run["names"], title=title,
+                                 subtitles=run["subtitles"], max_faces=args.max_faces, up=getattr(args, "up", None),
+                                 status=text, status_ok=ok))
+
+    summary = _read_summary(outdir)
+    if summary is not None and _inside(target, outdir):  # listed in the run's summary, under its lock
+        run = _view_into_run(outdir, summary["command"], target, write)
+    else:
+        run = load_run(outdir)
+        try:
+            write(target, run)
+        except OSError as e:
+            raise ViewerError(f"cannot write {target}: {e.strerror or e}: choose another --output") from None
+    if run["status"] is not None and not run["status"][1]:
+        stderr_line(f"{PROG} view: warning: {outdir} holds no converged result; run status: {run['status'][0]}")
     if not getattr(args, "quiet", False):
         shown = (f"decimated from {info['original_vertices']} to {info['vertices']} vertices" if info["decimated"]
                  else f"{info['vertices']} vertices")
-        print(f"{PROG} view: wrote {target} ({len(run['names'])} fields, {shown}, {info['bytes']} bytes)")
+        status = f", run status: {run['status'][0]}" if run["status"] is not None else ""
+        print(f"{PROG} view: wrote {target} ({len(run['names'])} fields, {shown}, {info['bytes']} bytes{status})")
     return 0
+
+
+def _view_into_run(outdir: Path, command: str, target: Path, write: Any) -> dict:
+    """Read the run and write the page into its folder under the folder's lock, the page listed in its
+    ``summary.json`` (``RunDir.amend``): the next run into the folder removes it with the old run's files."""
+    from .run_dir import OutputError, RunDir
+
+    if not os.access(outdir, os.W_OK | os.X_OK):
+        raise ViewerError(f"cannot write in {outdir} (not writable): choose another --output")
+    role = "view" if target.name == VIEW_NAME else f"view:{target.name}"
+    try:
+        with RunDir(outdir, command) as rd:
+            run = load_run(outdir)
+            rd.write(role, target.name, lambda fh: write(fh, run))
+            rd.amend(_encode)
+    except OutputError as e:
+        raise ViewerError(str(e).replace("choose another --out", "write the page elsewhere (--output FILE)")) from None
+    return run
