@@ -14,7 +14,7 @@ diagonal), so the tangent projection is ``P(V) = V − S∘(ΦΛ)`` with ``L_S(�
     grad f = P(S∘A⁻¹∇f),   Hess f[ξ] = P(S∘(2A⁻¹Wξ − ξΛ)),  Λ = L_S⁻¹ sym(Φᵀ S∘∇f)   (9.17)
 
 (``∇f = 2WΦ + μ w∘s``; Λ is the Lagrange multiplier). Newton steps by preconditioned truncated CG
-(per column, the sparse Cholesky factor of ``2(W + σA)`` restricted to the column's support), Armijo
+(one sparse Cholesky factor of ``2(W + σA)``, its solves masked to the support), Armijo
 backtracking on the true objective, and an orthant-wise retraction: entries that would cross zero are
 set to zero and leave ``S``, then ``ΦᵀAΦ = I`` is restored by Newton's method along ``S∘(ΦΛ)`` (zeros stay
 exactly zero). Zero entries that violate (9.9) (``|v_ij| > μ w_i``, ``v = 2WΦ − AΦΛ``) join ``S`` with the
@@ -49,8 +49,6 @@ TINY = 1e-6
 ROUNDOFF = 1e-12
 #: a Newton run stops as "stalled" when the objective fell by ≤ 1e-10 (relative) over this many steps
 STALL_WINDOW = 20
-#: a column's preconditioner factor is rebuilt when its support shrank by more than this fraction
-REFACTOR = 0.2
 __all__ = ["SupportFinish", "FinishResult", "finish_support"]
 
 FINISH_STATUSES = ("converged", "stalled", "max_rounds", "max_iters", "line_search_failed", "retraction_failed",
@@ -119,35 +117,24 @@ class FinishResult:
 
 
 class _Restricted:
-    """Problem (9.16) on the support ``mask`` with signs ``signs``: value, gradient, Hessian, retraction.
-    ``set_support`` changes the support (refactoring only the columns whose support changed)."""
+    """Problem (9.16) on the support ``mask`` with signs ``signs``: value, gradient, Hessian, retraction, and the
+    preconditioner: one sparse Cholesky factor of ``2(W + σA)`` for all columns and supports, applied as
+    ``P(r) = proj(S∘K⁻¹(a∘(S∘r)))`` — a principal block of an SPD inverse, so SPD on every support. Measured
+    against a factor of each column's support block (refactored as supports changed), same minima and
+    residuals: example:bumpy 3.4 → 3.1 s, torus 1.4 → 0.8 s, patch 1.8 → 0.9 s (k = 10, μ = 0.01n), ManPG
+    n = 1024 0.20 → 0.16 s — more CG iterations (508 → 811 on bumpy), each one k-column solve instead of k."""
 
     def __init__(self, W, a, w, mu, mask, signs, sigma):
         self.W, self.a, self.w, self.mu, self.sigma = sp.csr_matrix(W), a, w, mu, sigma
-        self.products = self.factorizations = 0
-        self.mask = np.zeros_like(mask)
-        self._factors = [(np.zeros(0, dtype=np.int64), None)] * mask.shape[1]
+        self.products = 0
+        self.factor = SymmetricFactor((2.0 * (self.W + sp.diags(sigma * a))).tocsc(), check=False)
+        self.factorizations = 1
         self.set_support(mask, signs)
 
     def set_support(self, mask, signs):
-        """A new support. A column's preconditioner factor is rebuilt only when its support left the factored
-        set or shrank by more than ``REFACTOR`` of it (a principal block of the inverse of an SPD matrix
-        is SPD, so a factor of a larger support still preconditions)."""
-        for j in range(mask.shape[1]):
-            idx = np.flatnonzero(mask[:, j])
-            old, factor = self._factors[j]
-            inside = idx.size == 0 or (old.size and np.all(np.isin(idx, old, assume_unique=True)))
-            if inside and idx.size >= (1.0 - REFACTOR) * old.size:  # (old: the factored set)
-                continue
-            factor = None
-            if idx.size:
-                K = 2.0 * (self.W[idx][:, idx] + sp.diags(self.sigma * self.a[idx]))
-                factor = SymmetricFactor(K, check=False)
-                self.factorizations += 1
-            self._factors[j] = (idx, factor)
+        """A new support and sign pattern (no refactoring: the preconditioner does not depend on them)."""
         self.mask, self.signs = mask.copy(), signs * mask
         self.lin = self.mu * self.w[:, None] * self.signs  # μ w∘s on the support
-
     def violations(self, Phi, WPhi, lam, margin: float):
         """Zero entries violating (9.9) (``|v_ij| > (1 + margin) μ w_i``, ``v = 2WΦ − AΦΛ``), the
         ``A⁻¹``-norm of their excess and v."""
@@ -181,10 +168,7 @@ class _Restricted:
         return self.project(gram, Phi, self.mask * (2.0 * self.matvec(xi) / self.a[:, None] - xi @ lam))
 
     def precondition(self, gram, Phi, r):
-        z = np.zeros_like(r)
-        for j, (idx, factor) in enumerate(self._factors):
-            if factor is not None:
-                z[idx, j] = factor.solve(self.a[idx] * r[idx, j])
+        z = self.factor.solve(self.a[:, None] * (self.mask * r))
         return self.project(gram, Phi, self.mask * z)
 
     def inner(self, x, y):
