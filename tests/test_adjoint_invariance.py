@@ -4,6 +4,7 @@ vanishes on vertical directions XΩ) and differentiates invariant quantities rig
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import stiefel
 from stiefel.derivatives.implicit import INVARIANCE_RATIO, riemannian_residual, vertical_ratio
@@ -42,6 +43,7 @@ def test_invariant_objective_derivative_by_default_matches_resolved_finite_diffe
     assert np.isfinite(g) and abs(g - fd) <= 1e-6 * max(1.0, abs(fd))
 
 
+@pytest.mark.slow
 def test_the_vertical_ratio_tells_invariant_from_isolated_minimisers():
     for F, invariant in ((invariant_F, True), (brockett_F, False)):
         X = stiefel.minimize(F, S, X0, args=0.3, method="lbfgs", gtol=1e-10, max_iters=3000).x
