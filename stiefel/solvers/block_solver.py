@@ -17,6 +17,7 @@ from types import SimpleNamespace
 from typing import Any, Callable
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
@@ -215,7 +216,8 @@ def minimize(
         ``converged`` when a derivative is taken through the solve).
       monitor: optional JAX function ``X ↦ scalar`` recorded at every iterate in
         ``history.monitor`` (e.g. the true non-smooth objective, for time-to-target curves).
-      args: parameters θ passed to ``F(X, args)``. The solution is differentiable in them (and in
+      args: parameters θ passed to ``F(X, args)`` (Python floats in it are traced values, as for ``jax.jit``: a new
+        value reuses the compiled solve; use them in JAX operations, not in Python ``if``). The solution is differentiable in them (and in
         arrays closed over by F, and in M) under ``jax.jvp``/``jax.grad``/``jax.jacfwd`` by implicit
         differentiation (docs/maths.md §9); call ``minimize`` inside the differentiated function. Under
         such tracing the solve is not timed separately (``wall_time = compile_time = 0``) and
@@ -257,6 +259,9 @@ def minimize(
     if precondition not in PRECONDITIONING_MODES:
         raise StiefelError(f"unknown precondition mode {precondition!r}; choose one of {PRECONDITIONING_MODES}")
     X0 = jnp.asarray(X0, dtype=manifold.dtype)
+    # Python floats in args are values, as jax.jit's arguments are: traced, so a new θ reuses the compiled solve
+    # (static leaves of args would compile once per value: the README's finite difference compiled twice more)
+    args = jax.tree_util.tree_map(lambda x: jnp.asarray(x) if isinstance(x, float) else x, args)
     traced = is_traced(F, manifold, X0, args, preconditioner, monitor)
     if check and not is_traced(X0):
         manifold.check_point(X0, atol=max(1e-8, 1e3 * float(jnp.finfo(manifold.dtype).eps)))
