@@ -29,6 +29,7 @@ def _loss(F, t, **kw):
     return jnp.trace(X.T @ B @ X)
 
 
+@pytest.mark.slow
 def test_invariant_objective_derivative_by_default_matches_resolved_finite_differences():
     """stiefel.minimize's defaults (CG, the default adjoint) at gtol 1e-8: NaN before the detection (measured; the
     tangent-space CG fails on the singular Hessian), now the re-solved finite difference to 1e-6."""

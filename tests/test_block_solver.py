@@ -70,6 +70,7 @@ def test_sparse_metric_and_result_fields(problem):
     assert res.stats["n_fevals"] >= int(res.iterations) and res.wall_time > 0 and res.compile_time >= 0
 
 
+@pytest.mark.slow
 def test_max_iters_and_non_finite_status(problem):
     W, M, F, _ = problem
     S = GeneralizedStiefel(M, K)

@@ -69,6 +69,7 @@ def test_reports_are_rate_limited(problem):
     assert len(reports) <= 2 + warmup + elapsed / 0.2 * 1.5
 
 
+@pytest.mark.slow
 def test_stop_event_and_ctrl_c_interrupt_with_the_current_iterate(problem):
     _, _, F, S, X0 = problem
     stop = threading.Event()

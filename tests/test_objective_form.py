@@ -18,6 +18,7 @@ S = stiefel.GeneralizedStiefel(jnp.linspace(1.0, 2.0, 8), 2)
 X0 = S.random_point(jax.random.PRNGKey(0))
 
 
+@pytest.mark.slow
 def test_an_optimistix_objective_runs_unchanged_in_minimize():
     fn = lambda X, args: jnp.trace(X.T @ A @ X)  # noqa: E731 — written for optx.minimise
     res = stiefel.minimize(fn, S, X0, method="lbfgs", gtol=1e-9)

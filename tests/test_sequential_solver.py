@@ -48,6 +48,7 @@ def test_mu_zero_reproduces_eigsh_plain_cg(problem):
     assert_eigenpairs(res, W, M)
 
 
+@pytest.mark.slow
 def test_mu_zero_reproduces_eigsh_preconditioned(problem):
     W, M, f = problem
     res = minimize_sequential(f, M, K, gtol=1e-10, max_iters=1000 * K, preconditioner=shifted_inverse(W, M, 0.05))
