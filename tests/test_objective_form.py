@@ -1,4 +1,4 @@
-"""One objective signature: stiefel.minimize takes optx.minimise's fn(X, args) as well as F(X) (issue 38 item 3)."""
+"""One objective signature: stiefel.minimize takes optx.minimise's fn(X, args) as well as F(X)."""
 
 import functools
 

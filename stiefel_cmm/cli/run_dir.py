@@ -325,6 +325,16 @@ class RunDir:
 
     # ------------------------------------------------------------------ commit
 
+    def _stage_summary(self, text: str, names: set) -> tuple[Path, Path]:
+        """Stage the summary ``text`` and the journal naming ``names`` (the files a crash may leave), then run the
+        pre-commit check; returns ``(staging directory, run directory)``."""
+        self.write_text(None, SUMMARY, text)
+        self.write_text(None, JOURNAL, json.dumps({"command": self.command, "names": sorted(names)}) + "\n")
+        assert self._staging is not None
+        if self.check is not None:
+            self.check()
+        return self._staging, self.path
+
     def commit(self, summary: dict, encode: Callable[[dict], str]) -> dict:
         """Swap this run's files in and write ``summary.json`` (``summary`` plus ``files``) last.
 
@@ -334,13 +344,7 @@ class RunDir:
         stale = sorted((self._old_names | set(self.owned)) - set(new))
         doc = {**summary, "files": {role: dict(rec) for role, rec in self.files.items()},
                "other_files": self._others(set(new), set(stale))}
-        self.write_text(None, SUMMARY, encode(doc))
-        journal = {"command": self.command, "names": sorted(self._old_names | set(self.owned) | set(new))}
-        self.write_text(None, JOURNAL, json.dumps(journal) + "\n")
-        staging, p = self._staging, self.path
-        assert staging is not None
-        if self.check is not None:
-            self.check()
+        staging, p = self._stage_summary(encode(doc), self._old_names | set(self.owned) | set(new))
         with _hold_signals():
             try:
                 os.replace(staging / JOURNAL, p / JOURNAL)
@@ -402,13 +406,7 @@ class RunDir:
         new = [rec["name"] for rec in self.files.values()]
         if isinstance(doc.get("other_files"), list):  # a name this run now lists is no longer another file
             doc["other_files"] = [n for n in doc["other_files"] if n not in new]
-        self.write_text(None, SUMMARY, encode(doc))
-        journal = {"command": self.command, "names": sorted(self._old_names | set(new))}
-        self.write_text(None, JOURNAL, json.dumps(journal) + "\n")
-        staging, p = self._staging, self.path
-        assert staging is not None
-        if self.check is not None:
-            self.check()
+        staging, p = self._stage_summary(encode(doc), self._old_names | set(new))
         with _hold_signals():
             try:
                 os.replace(staging / JOURNAL, p / JOURNAL)
