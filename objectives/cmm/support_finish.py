@@ -274,14 +274,13 @@ def _newton(prob: _Restricted, Phi, gtol_abs: float, scale: float, budget: int, 
             mask = prob.mask.copy()
             mask[stuck] = 0.0
             new = (Phi, WPhi, f)
-            if np.any(Phi[stuck] != 0.0):
+            if np.any(Phi[stuck] != 0.0):  # a failed restoration keeps the entries (new = None)
                 restored = prob.restore(mask * Phi, mask)
-                if restored is not None:
-                    W_restored = prob.matvec(restored)
-                    new = (restored, W_restored, prob.value(restored, W_restored))
+                W_restored = None if restored is None else prob.matvec(restored)
+                new = None if restored is None else (restored, W_restored, prob.value(restored, W_restored))
             # zeroing entries below TINY of the peak moves the objective by next to nothing: a restoration that
             # moved it more jumped elsewhere (an ill-conditioned Gram map) and is refused, the entries stay
-            if new[2] <= f + 1e-9 * max(abs(f), 1.0):
+            if new is not None and new[2] <= f + 1e-9 * max(abs(f), 1.0):
                 dropped += int(stuck.sum())
                 Phi, WPhi, f = new
                 prob.set_support(mask, prob.signs)
