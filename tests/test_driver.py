@@ -249,3 +249,21 @@ def test_host_monitor_rate_limit_and_errors():
 
     mon = HostMonitor(ctrl_c, max_iters=10)
     assert mon.tick(1, 1.0, 1.0) and mon.interrupted
+
+
+def test_one_shot_programs_compile_without_optimisation_and_agree():
+    """``optimize=False`` compiles with ``ONE_SHOT_OPTIONS`` (the backend's optimisation level 0): the program's
+    results equal the optimised program's, and a refused option would raise here rather than be ignored."""
+    from stiefel.runtime.compilation import ONE_SHOT_OPTIONS, compile_aot, run_compiled
+
+    assert ONE_SHOT_OPTIONS == {"xla_backend_optimization_level": 0}
+
+    def f(X, t):
+        return jnp.sum(jnp.sin(X) ** 2 * t) + jnp.linalg.norm(X @ X.T)
+
+    X = jnp.linspace(-1.0, 1.0, 60).reshape(12, 5)
+    t = jnp.asarray(0.3)
+    fast, _, _ = run_compiled(f, X, t)
+    plain, compile_s, _ = run_compiled(f, X, t, optimize=False)
+    assert compile_s > 0.0 and float(plain) == pytest.approx(float(fast), rel=1e-15)
+    assert float(compile_aot(f, X, t, optimize=False)(X, t)) == pytest.approx(float(fast), rel=1e-15)

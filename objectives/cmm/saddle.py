@@ -49,13 +49,14 @@ def check(F, manifold, X, P, *, width: float, threshold: float) -> tuple:
     """
     mask = (jnp.abs(X) > MASK_FACTOR * width).astype(X.dtype)
     solve = None if P is None else P.solve
-    curv, t_compile, t_run = run_compiled(_curvature, F, manifold, X, solve, mask)
+    # both run once or twice a solve: compiled without the backend's optimisation passes (ONE_SHOT_OPTIONS)
+    curv, t_compile, t_run = run_compiled(_curvature, F, manifold, X, solve, mask, optimize=False)
     theta = float(curv.value)
     record = {"curvature": theta, "residual": float(curv.residual), "lobpcg_steps": int(curv.iterations),
               "step": 0.0, "decrease": 0.0}
     X_new = None
     if np.isfinite(theta) and theta < -threshold:
-        step, c2, r2 = run_compiled(escape_step, F, manifold, X, curv)
+        step, c2, r2 = run_compiled(escape_step, F, manifold, X, curv, optimize=False)
         t_compile, t_run = t_compile + c2, t_run + r2
         if bool(step.accepted):
             X_new = step.X

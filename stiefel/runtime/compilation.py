@@ -43,23 +43,36 @@ def is_traced(*trees) -> bool:
     return any(isinstance(leaf, jax.core.Tracer) for leaf in leaves)
 
 
+#: XLA options of a program that runs once (a saddle check, a solver's initial state): the backend's optimisation
+#: passes cost more than they save there (measured on example:patch, k = 10, under load: the saddle check's LOBPCG
+#: 7.9 → 2.7 s to compile, its run and the solution unchanged to the last digit); the solver loop keeps them
+#: (without: 6.5 → 4.2 s to compile but 5.8 → 8.8 s to run)
+ONE_SHOT_OPTIONS = {"xla_backend_optimization_level": 0}
+
+
+def compile_lowered(lowered, *, optimize: bool = True):
+    """``lowered.compile()``; with ``optimize=False`` the ``ONE_SHOT_OPTIONS`` (per program: no global state)."""
+    return lowered.compile() if optimize else lowered.compile(compiler_options=dict(ONE_SHOT_OPTIONS))
+
+
 @partial(jax.jit, static_argnums=(1,))
 def _call(dynamic, static):
     fn, static_args = static
     return fn(*eqx.combine(dynamic, static_args))
 
 
-def run_compiled(fn, *args):
+def run_compiled(fn, *args, optimize: bool = True):
     """Run ``fn(*args)`` jitted; return ``(out, compile_seconds, run_seconds)``.
 
     Arrays in ``args`` are traced; everything else (callables, options, static
     fields of manifolds) is static and must be hashable. JAX caches both the
     lowering and the executable, so a repeated call with the same static parts
-    and shapes costs no compilation (and reports ~0 compile time).
+    and shapes costs no compilation (and reports ~0 compile time). ``optimize=False``: compiled with
+    ``ONE_SHOT_OPTIONS`` (for programs run once or twice).
     """
     dynamic, static_args = eqx.partition(args, eqx.is_array)
     t0 = time.perf_counter()
-    compiled = _call.lower(dynamic, (fn, static_args)).compile()
+    compiled = compile_lowered(_call.lower(dynamic, (fn, static_args)), optimize=optimize)
     t1 = time.perf_counter()
     out = compiled(dynamic)
     out = jax.block_until_ready(out)
@@ -67,11 +80,12 @@ def run_compiled(fn, *args):
     return out, t1 - t0, t2 - t1
 
 
-def compile_aot(fn, *args):
+def compile_aot(fn, *args, optimize: bool = True):
     """Trace, lower and compile ``fn(*args)`` once (arrays traced, the rest static, as in ``run_compiled``);
-    return a callable taking arguments of the same structure (new array values) that runs the executable."""
+    return a callable taking arguments of the same structure (new array values) that runs the executable.
+    ``optimize=False``: ``ONE_SHOT_OPTIONS``."""
     dynamic, static_args = eqx.partition(args, eqx.is_array)
-    compiled = _call.lower(dynamic, (fn, static_args)).compile()
+    compiled = compile_lowered(_call.lower(dynamic, (fn, static_args)), optimize=optimize)
 
     def call(*new_args):
         return compiled(eqx.partition(new_args, eqx.is_array)[0])

@@ -54,6 +54,8 @@ import equinox as eqx
 import jax
 import numpy as np
 
+from .compilation import compile_lowered
+
 __all__ = ["describe", "Uncacheable", "load_or_export", "store_dir", "SUBDIR", "STATS", "REJECTIONS"]
 
 SUBDIR = "stiefel-programs"
@@ -304,7 +306,7 @@ def _reject(path: Path, rejected: _Rejected) -> None:
     _LOG.info("stored program %s discarded: %s; traced again", path.name, detail)
 
 
-def _load(path: Path, key: dict, leaves: list, n_out: int):
+def _load(path: Path, key: dict, leaves: list, n_out: int, optimize: bool = True):
     """The compiled program stored at ``path`` for ``key``, verified; None when there is none or it is rejected
     (counted)."""
     try:
@@ -320,7 +322,7 @@ def _load(path: Path, key: dict, leaves: list, n_out: int):
         _reject(path, r)
         return None
     try:
-        return lowered.compile()
+        return compile_lowered(lowered, optimize=optimize)
     except Exception:  # noqa: BLE001 — e.g. a custom call this process lacks: traced afresh
         _reject(path, _Rejected("not compilable", "it does not compile here"))
         return None
@@ -341,12 +343,14 @@ def _write_atomic(path: Path, data: bytes) -> None:
         raise
 
 
-def load_or_export(fn: Callable, args: tuple, out_template: Any, *, custom_calls: tuple[str, ...] = ()):
+def load_or_export(fn: Callable, args: tuple, out_template: Any, *, custom_calls: tuple[str, ...] = (),
+                   optimize: bool = True):
     """A compiled ``fn(*args)`` (a callable taking arguments of the same structure) from this process's
     memory or the store (verified: module docstring), or traced, exported and stored now; None when the
     program is not cacheable (no store, an undescribable static part, or ``jax.export`` failing) — the caller
     then compiles as usual. ``out_template``: a pytree with the structure of ``fn``'s output (the store keeps
-    the flat program only). ``custom_calls``: custom-call targets to allow in the exported program."""
+    the flat program only). ``custom_calls``: custom-call targets to allow in the exported program.
+    ``optimize=False``: compiled with ``compilation.ONE_SHOT_OPTIONS`` (a program run once)."""
     where = store_dir()
     if where is None:
         return None
@@ -366,7 +370,7 @@ def load_or_export(fn: Callable, args: tuple, out_template: Any, *, custom_calls
     out_tree = jax.tree_util.tree_structure(out_template)
     key["outputs"] = out_tree.num_leaves
     path = where / f"{name}.jaxexport"
-    compiled = _load(path, key, leaves, out_tree.num_leaves)
+    compiled = _load(path, key, leaves, out_tree.num_leaves, optimize)
     if compiled is not None:
         STATS["loaded"] += 1
     else:
@@ -386,7 +390,7 @@ def load_or_export(fn: Callable, args: tuple, out_template: Any, *, custom_calls
             return None
         STATS["exported"] += 1
         try:
-            compiled = jax.jit(exported.call).lower(*leaves).compile()
+            compiled = compile_lowered(jax.jit(exported.call).lower(*leaves), optimize=optimize)
         except Exception:  # noqa: BLE001 — the caller traces and compiles as usual (and reports real errors)
             return None
         try:

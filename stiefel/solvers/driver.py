@@ -133,11 +133,12 @@ class _Estimate:
         return min(cap, (math.log(gnorm) - math.log(self.gtol)) / rate)
 
 
-def _program(fn, args: tuple, out_template):
+def _program(fn, args: tuple, out_template, optimize: bool = True):
     """``fn(*args)`` compiled: from ``stiefel.runtime.program_cache`` (no tracing) where it can serve it, else
-    traced and compiled (``compile_aot``)."""
-    call = program_cache.load_or_export(fn, args, out_template, custom_calls=ffi_solve.CUSTOM_CALLS)
-    return call if call is not None else compile_aot(fn, *args)
+    traced and compiled (``compile_aot``); ``optimize=False`` for a program run once (``ONE_SHOT_OPTIONS``)."""
+    call = program_cache.load_or_export(fn, args, out_template, custom_calls=ffi_solve.CUSTOM_CALLS,
+                                        optimize=optimize)
+    return call if call is not None else compile_aot(fn, *args, optimize=optimize)
 
 
 def run_chunked(solver, fn, X0, args, max_iters: int, *, progress: Callable | None = None,
@@ -153,7 +154,7 @@ def run_chunked(solver, fn, X0, args, max_iters: int, *, progress: Callable | No
     fn = _NoAux(fn)
     t0 = time.perf_counter()
     template = _steps.State(*([0] * len(_steps.State._fields)))._replace(history=History(0, 0, 0, 0), aux=None)
-    init = _program(_init, (solver, fn, X0, args), template)
+    init = _program(_init, (solver, fn, X0, args), template, optimize=False)  # runs once
     state = init(solver, fn, X0, args)
     advance = _program(_advance, (solver, fn, args, state, host_array(0, np.int32)), (template, 0))
     t_compile = time.perf_counter() - t0
