@@ -28,7 +28,10 @@ import numpy as np
 from jax.experimental.sparse import BCOO
 from jaxtyping import Array, Float, Int
 
-from .errors import DegenerateMeshError, EmptyMeshError, IndexOutOfRangeError, MeshError, NonTriangleFacesError
+from stiefel.validation import checked_finite
+
+from .errors import (DegenerateMeshError, EmptyMeshError, IndexOutOfRangeError, MeshError, NonFiniteVerticesError,
+                     NonTriangleFacesError)
 
 __all__ = ["laplacian_jax", "mass_diagonal_jax", "weight_operator_jax", "AREAS_JAX"]
 
@@ -113,6 +116,9 @@ def _validate(V, F, area: str) -> tuple[Array, _Pattern]:
             f"{int(rep.sum())} faces repeat a vertex, e.g. face {f} = {F[f].tolist()}; their cotangents "
             "are undefined: clean the mesh first (mesh.load removes such faces)"
         )
+    # a NaN or infinite coordinate is named here, as V (not later through W or the area it spoils); traced V: the
+    # host check when its value is known (e.g. under jax.grad), else a runtime check (eqx.error_if)
+    V = checked_finite("V", V, error=NonFiniteVerticesError)
     return V, _pattern_cached(n, m, np.ascontiguousarray(F, dtype=np.int64).tobytes())
 
 
