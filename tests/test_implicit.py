@@ -231,3 +231,23 @@ def test_closed_over_parameters_are_differentiated():
 
     a, b = float(jax.grad(closed)(0.3)), float(jax.grad(passed)(0.3))
     assert abs(a - b) <= 1e-8 * abs(b)
+
+
+@pytest.mark.slow
+def test_failed_adjoint_cg_raises_with_its_reason_or_gives_nan():
+    """A converged solve whose adjoint CG cannot finish (a budget of 2 steps at tol 1e-14): the derivative raises
+    lineax's error (throw=True, the default) or is NaN (throw=False) — never the half-solved number."""
+    W0, D, M = _eig_problem("diagonal")
+    S = GeneralizedStiefel(M, K, retraction="cholesky")
+    X0 = S.random_point(jax.random.PRNGKey(7))
+    B = jnp.asarray(_random_sym(N, 14))
+
+    def quantity(th, throw):
+        fn = lambda X, t: jnp.trace(X.T @ (W0 + t * D) @ X)  # noqa: E731
+        adjoint = RiemannianImplicitAdjoint(invariant=True, precondition=False, tol=1e-14, max_steps=2, throw=throw)
+        sol = optx.minimise(fn, RiemannianLBFGS(S, 0.0, 1e-11), X0, th, max_steps=4000, adjoint=adjoint)
+        return jnp.trace(sol.value.T @ B @ sol.value)
+
+    assert np.isnan(float(jax.grad(lambda t: quantity(t, False))(0.3)))
+    with pytest.raises(Exception, match="max_steps|maximum number of"):
+        jax.grad(lambda t: quantity(t, True))(0.3)

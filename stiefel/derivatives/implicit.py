@@ -37,8 +37,8 @@ So the same ``eqx.filter_custom_jvp`` pattern as optimistix's carries the struct
 and lineax supplies CG (made transposable by ``lax.custom_linear_solve``).
 
 A derivative through a solve that did not converge is an error (``throw=True``, raised when the
-derivative is computed) or NaN (``throw=False``); an adjoint CG that fails gives NaN — never a
-silently wrong number.
+derivative is computed) or NaN (``throw=False``), and so is one whose adjoint CG fails (lineax's error names
+the reason) — never a silently wrong number.
 """
 
 from __future__ import annotations
@@ -95,11 +95,14 @@ def vertical_ratio(jac, manifold, X):
     return rel(V) / jnp.maximum(rel(Z), jnp.finfo(X.dtype).tiny)
 
 
-def tangent_solve(jac, manifold, X, b, *, invariant=False, preconditioner=None, tol=1e-10, max_steps=None):
+def tangent_solve(jac, manifold, X, b, *, invariant=False, preconditioner=None, tol=1e-10, max_steps=None,
+                  throw: bool = False):
     """Solve ``J[Ẋ] = b`` for the residual's Jacobian ``jac = Z ↦ J[Z]`` at a root ``X`` (module docstring).
 
-    Returns ``Ẋ`` (NaN where the adjoint CG failed). ``invariant`` (a bool, or a traced boolean): least-norm solve
-    on the horizontal space; ``preconditioner``: ``Y ↦ PY`` with ``P ≈ Hess⁻¹M⁻¹`` (e.g. ``(W + σM)⁻¹``).
+    Returns ``Ẋ``. ``invariant`` (a bool, or a traced boolean): least-norm solve on the horizontal space;
+    ``preconditioner``: ``Y ↦ PY`` with ``P ≈ Hess⁻¹M⁻¹`` (e.g. ``(W + σM)⁻¹``). An adjoint CG that fails (its
+    step budget spent, a non-finite or indefinite operator) raises lineax's error with its reason when the program
+    runs (``throw``), else gives NaN.
     """
     S = manifold
     w = jnp.asarray(invariant, X.dtype)  # 1: horizontal projection Z − X XᵀMZ; 0: tangent projection Z − X sym(XᵀMZ)
@@ -131,7 +134,7 @@ def tangent_solve(jac, manifold, X, b, *, invariant=False, preconditioner=None, 
         scale = jnp.maximum(jnp.max(jnp.abs(rhs)), jnp.finfo(rhs.dtype).tiny)
         op = lx.FunctionLinearOperator(matvec, struct, tags=lx.positive_semidefinite_tag)
         sol = lx.linear_solve(op, rhs / scale, lx.CG(rtol=tol, atol=tol, max_steps=max_steps),
-                              options=options, throw=False)
+                              options=options, throw=throw)
         return sol.value * scale * jnp.where(sol.result == lx.RESULTS.successful, 1.0, jnp.nan)
 
     return Q(jax.lax.custom_linear_solve(A, rhs, cg, symmetric=True)) + XN
@@ -165,7 +168,7 @@ def _implicit_jvp(primals, tangents):
     if invariant is None:  # detected at the root: the Hessian vanishes on vertical directions
         invariant = vertical_ratio(jac, S, root) <= INVARIANCE_RATIO
     t_root = tangent_solve(jac, S, root, -r_dot, invariant=invariant, preconditioner=P,
-                           tol=adjoint.tol, max_steps=adjoint.max_steps)
+                           tol=adjoint.tol, max_steps=adjoint.max_steps, throw=adjoint.throw)
     stats = residual[-1]
     ok = stats["status"] == Status.CONVERGED
     if adjoint.throw:
@@ -188,7 +191,8 @@ class RiemannianImplicitAdjoint(optx.AbstractAdjoint):
       precondition: use the solver's preconditioner in the adjoint CG.
       tol: relative tolerance of the adjoint CG (on the scaled right-hand side).
       max_steps: CG iterations (default: lineax's 10·nk).
-      throw: a derivative through a non-converged solve raises (True) or is NaN (False).
+      throw: a derivative through a non-converged solve, or whose adjoint CG fails, raises (True) or is NaN
+        (False).
 
     Not for a ``stiefel.Product`` (``ParameterError`` when the solve is set up).
     """
