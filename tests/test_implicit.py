@@ -150,12 +150,14 @@ def test_noninvariant_derivative_against_resolved_fd():
     # θ as arrays throughout: a Python float in args is static, and every new value would compile anew
     theta = (jnp.asarray(0.5), jnp.ones(N))
     g_mu, g_w = jax.grad(loss)(theta)
-    h = 1e-6
+    # h = 1e-3: the central difference's O(h²) error is ~1e-9 relative here, while at h = 1e-6 the re-solves'
+    # stopping noise (gtol 1e-12, 69 vs 72 iterations) divided by 2h is ~5e-5 relative (measured)
+    h = 1e-3
     fd_mu = (loss((theta[0] + h, theta[1])) - loss((theta[0] - h, theta[1]))) / (2 * h)
     e3 = jnp.zeros(N).at[3].set(1.0)
     fd_w3 = (loss((theta[0], theta[1] + h * e3)) - loss((theta[0], theta[1] - h * e3))) / (2 * h)
-    assert abs(float(g_mu) - float(fd_mu)) <= 1e-5 * abs(float(fd_mu))
-    assert abs(float(g_w[3]) - float(fd_w3)) <= 1e-5 * abs(float(fd_w3))
+    assert abs(float(g_mu) - float(fd_mu)) <= 1e-6 * abs(float(fd_mu))
+    assert abs(float(g_w[3]) - float(fd_w3)) <= 1e-6 * abs(float(fd_w3))
     jvp_mu = jax.jvp(lambda m: loss((m, theta[1])), (theta[0],), (jnp.ones(()),))[1]
     assert abs(float(jvp_mu) - float(g_mu)) <= 1e-8 * abs(float(g_mu))
 
