@@ -408,3 +408,26 @@ def test_stored_programs_serve_new_processes_with_the_same_answer(tmp_path):
     again = run(cache, 8)
     assert again["exported"] == again["rejected"] == 2 and again["rejections"] == {"unknown format": 2}
     assert again["objective"] == pytest.approx(plain["objective"], rel=1e-12)
+
+
+def test_saddle_check_programs_are_stored_and_loaded(store):
+    """The saddle check's two programs (LOBPCG curvature, escape step) go through the store like the solver's:
+    a second "process" loads both, untraced, with the same results (a weakly typed LOBPCG count once made the
+    escape step's key differ between the process that compiled it and one that loaded it)."""
+    from objectives.cmm import saddle
+    from objectives.energy.energies import cmm_energy
+    from stiefel import GeneralizedStiefel
+    from stiefel.linalg.operators import SparseOperator
+    from stiefel_cases import grid_laplacian
+
+    W, a = grid_laplacian(6), np.full(36, 1 / 36)
+    F = cmm_energy(SparseOperator.from_scipy(W), a, 1.0, smoothing="f6")
+    S = GeneralizedStiefel(a, 3)
+    X = S.random_point(jax.random.PRNGKey(0))
+    runs = []
+    for _ in range(2):
+        pc._MEMORY.clear()  # as in a new process
+        X_new, record, _, _ = saddle.check(F, S, X, None, width=1e-3, threshold=-np.inf)  # always steps
+        runs.append((np.asarray(X_new), record["curvature"]))
+    assert pc.STATS["stored"] == 2 and pc.STATS["loaded"] == 2 and pc.STATS["exported"] == 2
+    assert np.array_equal(runs[0][0], runs[1][0]) and runs[0][1] == runs[1][1]

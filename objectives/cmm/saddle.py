@@ -19,8 +19,8 @@ from __future__ import annotations
 import numpy as np
 import jax.numpy as jnp
 
-from stiefel.runtime.compilation import run_compiled
-from stiefel.solvers.saddle import escape_step, negative_curvature
+from stiefel.solvers.driver import run_program
+from stiefel.solvers.saddle import Curvature, EscapeStep, escape_step, negative_curvature
 
 __all__ = ["check", "MASK_FACTOR", "LOBPCG_STEPS"]
 
@@ -49,14 +49,16 @@ def check(F, manifold, X, P, *, width: float, threshold: float) -> tuple:
     """
     mask = (jnp.abs(X) > MASK_FACTOR * width).astype(X.dtype)
     solve = None if P is None else P.solve
-    # both run once or twice a solve: compiled without the backend's optimisation passes (ONE_SHOT_OPTIONS)
-    curv, t_compile, t_run = run_compiled(_curvature, F, manifold, X, solve, mask, optimize=False)
+    # both run once or twice a solve: compiled without the backend's optimisation passes (ONE_SHOT_OPTIONS), and
+    # stored with the solver's programs when the persistent cache is on (a later process loads them untraced)
+    curv, t_compile, t_run = run_program(_curvature, (F, manifold, X, solve, mask), Curvature(0, 0, 0, 0),
+                                         optimize=False)
     theta = float(curv.value)
     record = {"curvature": theta, "residual": float(curv.residual), "lobpcg_steps": int(curv.iterations),
               "step": 0.0, "decrease": 0.0}
     X_new = None
     if np.isfinite(theta) and theta < -threshold:
-        step, c2, r2 = run_compiled(escape_step, F, manifold, X, curv, optimize=False)
+        step, c2, r2 = run_program(escape_step, (F, manifold, X, curv), EscapeStep(0, 0, 0, 0, 0, 0), optimize=False)
         t_compile, t_run = t_compile + c2, t_run + r2
         if bool(step.accepted):
             X_new = step.X

@@ -164,7 +164,9 @@ def negative_curvature(fn: Callable, manifold: GeneralizedStiefel, X: Float[Arra
     d, Hd = unit(x, full_hess(x))  # the true Rayleigh quotient and residual of the (tangent) direction
     theta = inner(d, Hd)
     _, res = residual(d, Hd, theta)
-    return Curvature(value=theta, direction=d, residual=res, iterations=it)
+    # a strongly typed count: a stored program's outputs lose JAX's weak types, and a weak one here would make the
+    # escape step's program key differ between a process that compiled this and one that loaded it
+    return Curvature(value=theta, direction=d, residual=res, iterations=jnp.asarray(it, it.dtype))
 
 
 def escape_step(fn: Callable, manifold: GeneralizedStiefel, X: Float[Array, "n k"], curvature: Curvature, *,
