@@ -30,6 +30,8 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
                                              "meshes: total time against eigsh, peak memory"),
     "stiefel": ("bench.bench_stiefel", "manifold layer at μ = 0 on grid Laplacians: solvers, retractions, "
                                        "preconditioning against eigsh"),
+    "default-method": ("bench.default_method", "every stiefel.minimize method on a panel with known optima "
+                                               "(Brockett, eigenproblems, Procrustes, sparse PCA): the default's evidence"),
     "peers": ("bench.peers", "Riemannian CG per iteration, each retraction, against pymanopt's"),
     "second-order": ("bench.second_order", "trust regions against CG / L-BFGS and pymanopt's TrustRegions: "
                                            "Brockett and the CMM final stage"),

@@ -16,7 +16,7 @@ __all__ = ["Status", "History", "Result", "SequentialResult"]
 class Status:
     """Integer codes of ``Result.status``."""
 
-    CONVERGED = 0  #: gradient norm ≤ gtol (or step ≤ xtol)
+    CONVERGED = 0  #: gradient norm ≤ gtol (or step ≤ xtol), or a line search failed at the round-off floor
     MAX_ITERS = 1  #: ran out of iterations
     LINE_SEARCH_FAILED = 2  #: no acceptable step along a descent direction
     NON_FINITE = 3  #: the objective or its gradient became non-finite (last finite iterate kept)
@@ -97,7 +97,10 @@ class Result(eqx.Module):
       value: ``F(x)``; grad_norm: Riemannian gradient norm at ``x``.
       iterations: iterations taken; status: a ``Status`` code.
       history: ``History`` of length ``max_iters + 1``.
-      stats: counters (objective/gradient evaluations, line-search trials, ...).
+      stats: counters (objective/gradient evaluations, line-search trials, ...); ``round_off_floor``, the
+        gradient norm that rounding allows (``stiefel.solvers.linesearch.round_off_floor``), and ``at_floor``:
+        the run converged there (its line search failed with the gradient norm at or below the floor; ``gtol``
+        was below what rounding allows).
       wall_time: seconds for the solve (compiled), compile_time: seconds to trace and compile.
     """
 
@@ -114,7 +117,8 @@ class Result(eqx.Module):
     def __repr__(self) -> str:
         """One line: status, iterations, value, gradient norm, shape and times (no arrays)."""
         shape = "×".join(map(str, np.shape(self.x)))
-        return (f"Result(status={_status_text(self.status)}, {_short('iterations', self.iterations, 'd')}, "
+        floor = " at the round-off floor" if self.at_floor else ""
+        return (f"Result(status={_status_text(self.status)}{floor}, {_short('iterations', self.iterations, 'd')}, "
                 f"{_short('value', self.value, '.10g')}, {_short('grad_norm', self.grad_norm, '.3e')}, x: {shape}, "
                 f"solve {self.wall_time:.3f} s, compile {self.compile_time:.3f} s)")
 
@@ -125,6 +129,12 @@ class Result(eqx.Module):
     @property
     def converged(self) -> bool:
         return int(self.status) == Status.CONVERGED
+
+    @property
+    def at_floor(self) -> bool:
+        """Converged at the round-off floor (``stats["at_floor"]``); False when not recorded or traced."""
+        v = _concrete(self.stats.get("at_floor", False)) if isinstance(self.stats, dict) else None
+        return bool(v is not None and np.all(v))
 
     def trimmed_history(self) -> dict:
         """History as numpy arrays cut to ``iterations + 1`` entries."""

@@ -218,14 +218,16 @@ def test_results_print_short_values_not_arrays():
 
 
 def test_a_failed_retry_ends_the_run_as_line_search_failed():
-    """Below the round-off floor the search fails along the CG direction and again along −ξ: the run stops there
-    with line_search_failed (it used to repeat the same failed retry until max_iters, the iterate unchanged)."""
+    """CG's search fails along its direction and again along −ξ (here above the round-off floor, so not
+    convergence): the run stops there with line_search_failed (it used to repeat the same failed retry until
+    max_iters, the iterate unchanged)."""
     n, k = 30, 3
     A = np.diag(np.arange(1.0, n + 1))
     N = jnp.diag(jnp.arange(k, 0, -1.0))
     S = GeneralizedStiefel(None, k)
     X0 = GeneralizedStiefel(np.ones(n), k).random_point(jax.random.PRNGKey(1))
-    res = minimize(lambda X: jnp.trace(X.T @ A @ X @ N), S, X0, gtol=1e-15, max_iters=2000)
+    res = minimize(lambda X: jnp.trace(X.T @ A @ X @ N), S, X0, method="cg", gtol=1e-15,
+                   max_iters=2000)
     assert res.status_name == "line_search_failed" and int(res.iterations) < 2000
     assert float(res.value) == pytest.approx(10.0, rel=1e-14)  # the minimum 1·3 + 2·2 + 3·1, reached before
     steps = np.asarray(res.history.step)[1:int(res.iterations) + 1]

@@ -41,7 +41,7 @@ def test_chunked_iterates_equal_one_loop(problem):
     reports = []
     res = minimize(F, S, X0, gtol=1e-10, max_iters=400, preconditioner=P, progress=reports.append,
                    progress_interval=1e-6)
-    ref = solve_block(F, S, X0, BlockOptions(gtol=1e-10, max_iters=400, c2=0.1), preconditioner=P.solve)
+    ref = solve_block(F, S, X0, BlockOptions(gtol=1e-10, max_iters=400), preconditioner=P.solve)
     assert res.converged and int(ref.status) == Status.CONVERGED
     assert int(res.iterations) == int(ref.iterations)
     np.testing.assert_allclose(np.asarray(res.x), np.asarray(ref.x), atol=1e-9)

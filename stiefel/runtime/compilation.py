@@ -43,7 +43,7 @@ def is_traced(*trees) -> bool:
     return any(isinstance(leaf, jax.core.Tracer) for leaf in leaves)
 
 
-#: XLA options of a program that runs once (a saddle check, a solver's initial state): the backend's optimisation
+#: XLA options of a program that runs once or twice (a saddle check): the backend's optimisation
 #: passes cost more than they save there (measured on example:patch, k = 10, under load: the saddle check's LOBPCG
 #: 7.9 → 2.7 s to compile, its run and the solution unchanged to the last digit); the solver loop keeps them
 #: (without: 6.5 → 4.2 s to compile but 5.8 → 8.8 s to run)

@@ -165,7 +165,9 @@ def run_chunked(solver, fn, X0, args, max_iters: int, *, progress: Callable | No
     fn = _NoAux(fn)
     t0 = time.perf_counter()
     template = _steps.State(*([0] * len(_steps.State._fields)))._replace(history=History(0, 0, 0, 0), aux=None)
-    init = _program(_init, (solver, fn, X0, args), template, optimize=False)  # runs once
+    # the initial state is compiled like the loop (not ONE_SHOT_OPTIONS, though it runs once): the backend's
+    # optimisations change its rounding, and minimize must take optx.minimise's iterates to the last digit
+    init = _program(_init, (solver, fn, X0, args), template)
     state = init(solver, fn, X0, args)
     advance = _program(_advance, (solver, fn, args, state, host_array(0, np.int32)), (template, 0))
     t_compile = time.perf_counter() - t0

@@ -20,6 +20,10 @@ or (``xtol > 0``) an accepted step that moves X by ``≤ xtol``. ``optx.RESULTS`
 ``successful``; out of steps → ``nonlinear_max_steps_reached``; non-finite objective or
 gradient → ``nonfinite``; no acceptable step along a descent direction → ``nonlinear_divergence``
 (optimistix has no line-search code; the exact ``stiefel.Status`` is ``sol.stats["status"]``).
+Reaching the round-off floor is convergence: a search that fails with the gradient norm at or below
+``stiefel.solvers.linesearch.round_off_floor`` (``sol.stats["round_off_floor"]``; ``sol.stats["at_floor"]``
+says it happened) ends ``CONVERGED`` / ``successful`` (``settled_status``), any other failed search
+``LINE_SEARCH_FAILED``.
 Tolerances and line-search constants are runtime values (arrays): changing them never
 recompiles. Derivatives of the solution: use ``stiefel.RiemannianImplicitAdjoint`` —
 ``optx.ImplicitAdjoint`` differentiates "Euclidean gradient = 0", which is wrong on S_M.
@@ -31,12 +35,15 @@ from typing import Any, Callable, ClassVar
 
 import equinox as eqx
 import jax
+import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
+from jaxtyping import Array, Bool, Float, Int
 
 from . import block_steps as _steps
 from ..runtime.compilation import host_array
 from .block_steps import STALL_WINDOW_MAX, State
+from .linesearch import round_off_floor
 from ..errors import ParameterError, StiefelError
 from ..manifolds.manifold import GeneralizedStiefel
 from .preconditioning import PRECONDITIONING_MODES
@@ -44,7 +51,7 @@ from ..manifolds.product import Product
 from ..result import Status
 from ..validation import (check_count, check_nonnegative, check_positive, check_unit_interval, check_wolfe, is_traced_value)
 
-__all__ = ["RiemannianCG", "RiemannianLBFGS", "RiemannianBB", "STALL_WINDOW_MAX", "to_optx_result"]
+__all__ = ["RiemannianCG", "RiemannianLBFGS", "RiemannianBB", "STALL_WINDOW_MAX", "to_optx_result", "settled_status"]
 
 
 
@@ -65,6 +72,16 @@ def _check_manifold(manifold, preconditioner) -> None:
     if isinstance(manifold, Product) and preconditioner is not None:
         raise ParameterError("a preconditioner is not supported on a stiefel.Product (it acts on one (n, k) "
                              "array); pass preconditioner=None")
+
+
+def settled_status(state: State) -> tuple[Int[Array, ""], Float[Array, ""], Bool[Array, ""]]:
+    """``(status, floor, at_floor)``: ``state.status`` with a failed line search at the round-off floor counted
+    as ``CONVERGED``; ``floor`` is ``round_off_floor(F(X), F(X0), N)`` (N: the entries of ``state.X``, (n, k)
+    or a ``Product``'s tuple) and ``at_floor`` says the search failed with ``‖grad F‖ ≤ floor``. Traced or not."""
+    size = sum(int(np.size(x)) for x in jax.tree_util.tree_leaves(state.X))
+    floor = round_off_floor(state.F, state.history.value[..., 0], size)
+    at_floor = (state.status == Status.LINE_SEARCH_FAILED) & (state.gnorm <= floor)
+    return jnp.where(at_floor, Status.CONVERGED, state.status).astype(jnp.int32), floor, at_floor
 
 
 def to_optx_result(status):
@@ -155,10 +172,12 @@ class _RiemannianMinimiser(optx.AbstractMinimiser):
         return state.X, state, state.aux
 
     def terminate(self, fn, y, args, options, state: State, tags):
-        return state.status >= 0, to_optx_result(state.status)
+        return state.status >= 0, to_optx_result(settled_status(state)[0])
 
     def postprocess(self, fn, y, aux, args, options, state: State, tags, result):
-        stats = {"value": state.F, "grad_norm": state.gnorm, "status": state.status,
+        status, floor, at_floor = settled_status(state)
+        stats = {"value": state.F, "grad_norm": state.gnorm, "status": status, "round_off_floor": floor,
+                 "at_floor": at_floor,
                  "n_fevals": state.n_fevals, "n_grads": state.it + 1, "n_restarts": state.n_restarts,
                  "dist_to_manifold": self.manifold.dist_to_manifold(state.X), "history": state.history}
         return y, aux, stats
