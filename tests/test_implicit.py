@@ -197,6 +197,16 @@ def test_nonconverged_solve_gives_nan_or_raises():
     assert np.isnan(float(jax.jvp(lambda t: quantity(t, False), (0.3,), (1.0,))[1]))
     with pytest.raises(Exception, match="did not converge"):
         jax.grad(lambda t: quantity(t, True))(0.3)
+    # minimize's defaults (no adjoint, no throw): the derivative is refused, not NaN; the solve itself does not raise
+    S = GeneralizedStiefel(M, K, retraction="cholesky")
+    X0 = S.random_point(jax.random.PRNGKey(7))
+
+    def default(th):
+        return stiefel.minimize(lambda X, t: jnp.trace(X.T @ (W0 + t * D) @ X), S, X0, args=th, max_iters=3)
+
+    assert default(0.3).status_name == "max_iters"
+    with pytest.raises(Exception, match="did not converge"):
+        jax.grad(lambda t: jnp.sum(default(t).x[:4]))(0.3)
     # the primal value is still returned without derivatives, with its status
     res, _ = _solve_eig(W0, D, M, 0.3, max_iters=3, throw=False)
     assert res.status_name == "max_iters"

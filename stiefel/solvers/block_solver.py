@@ -24,7 +24,7 @@ import optimistix as optx
 
 from ..runtime.compilation import is_traced
 from .driver import DEFAULT_INTERVAL, CallbackError, run_chunked
-from ..errors import StiefelError
+from ..errors import ParameterError, StiefelError
 from ..derivatives.implicit import RiemannianImplicitAdjoint
 from ..manifolds.manifold import GeneralizedStiefel
 from .objective_form import takes_args
@@ -175,7 +175,7 @@ def minimize(
     bb_gamma: float = 0.85,
     memory: int = 8,
     check: bool = True,
-    throw: bool = False,
+    throw: bool | None = None,
     monitor: Callable | None = None,
     args: Any = None,
     adjoint: optx.AbstractAdjoint | None = None,
@@ -224,8 +224,10 @@ def minimize(
       memory: stored pairs (``"lbfgs"``), ≥ 1.
       check: validate ``X0`` (shape, finiteness, on the manifold to 1e-8, or to 1000 ulps in a
         lower precision: 1.2e-4 in float32).
-      throw: raise ``SolverError`` on ``line_search_failed`` / ``non_finite`` (and on any status but
-        ``converged`` when a derivative is taken through the solve).
+      throw: None (default): the result carries its status and a derivative through a solve that did not
+        converge raises (``RiemannianImplicitAdjoint(throw=True)``: never a silent NaN); True: also raise
+        ``SolverError`` on ``line_search_failed`` / ``non_finite``; False: NaN derivatives through a
+        non-converged solve, nothing raised.
       monitor: optional JAX function ``X ↦ scalar`` recorded at every iterate in
         ``history.monitor`` (e.g. the true non-smooth objective, for time-to-target curves).
       args: parameters θ passed to ``F(X, args)`` (Python floats in it are traced values, as for ``jax.jit``: a new
@@ -234,9 +236,9 @@ def minimize(
         differentiation (docs/maths.md §9); call ``minimize`` inside the differentiated function. Under
         such tracing the solve is not timed separately (``wall_time = compile_time = 0``) and
         ``throw`` checks run inside the computation.
-      adjoint: the ``optx`` adjoint (default ``RiemannianImplicitAdjoint(throw=throw)``; pass
+      adjoint: the ``optx`` adjoint (default ``RiemannianImplicitAdjoint(throw=throw is not False)``; pass
         ``RiemannianImplicitAdjoint(invariant=True)`` to assert ``F(XQ) = F(X)``; by default it is detected).
-        A derivative through a solve that did not converge is NaN, or an error with ``throw``.
+        A derivative through a solve that did not converge raises, or is NaN with ``throw=False``.
       budget: optional runtime limit ``0 ≤ budget ≤ max_iters`` (may be traced): warm-started stages
         sharing one total of iterations pass ``max_iters=total, budget=left`` and compile once; the
         status is ``max_iters`` when the budget ends the run.
@@ -286,7 +288,9 @@ def minimize(
     with_args = takes_args(F, args)
     solver = solver_for(manifold, opts, F=F, preconditioner=P, monitor=monitor, with_args=with_args, budget=budget)
     fn = F if with_args else _NoArgs(F)
-    adjoint = adjoint if adjoint is not None else RiemannianImplicitAdjoint(throw=throw)
+    if throw not in (None, True, False):
+        raise ParameterError(f"throw must be None, True or False, got {throw!r}")
+    adjoint = adjoint if adjoint is not None else RiemannianImplicitAdjoint(throw=throw is not False)
     if traced:  # inside jax.grad / jax.jvp / jit: no ahead-of-time timing, no host-side checks
         X, value, gnorm, it, status, history, stats = _run(fn, solver, X0, args, opts.max_iters, adjoint)
         if throw:
