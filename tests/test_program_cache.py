@@ -410,6 +410,7 @@ def test_stored_programs_serve_new_processes_with_the_same_answer(tmp_path):
     assert again["objective"] == pytest.approx(plain["objective"], rel=1e-12)
 
 
+@pytest.mark.slow
 def test_saddle_check_programs_are_stored_and_loaded(store):
     """The saddle check's two programs (LOBPCG curvature, escape step) go through the store like the solver's:
     a second "process" loads both, untraced, with the same results (a weakly typed LOBPCG count once made the
