@@ -224,6 +224,15 @@ def checked_number(name: str, value, *, low: float | None = None, high: float | 
         check_number(name, value, low=low, high=high, low_open=low_open, high_open=high_open, finite=finite,
                      error=error)
     _traced_scalar(name, value, error)
+    ok, message = traced_range(name, value, low=low, high=high, low_open=low_open, high_open=high_open,
+                               finite=finite)
+    return eqx.error_if(value, ~ok, message)
+
+
+def traced_range(name: str, value, *, low: float | None = None, high: float | None = None, low_open: bool = False,
+                 high_open: bool = False, finite: bool = True) -> tuple:
+    """``(ok, message)`` for a traced scalar: ``ok`` a traced boolean (the range of ``check_number``), the
+    message naming the rule, for ``eqx.error_if`` on whatever array carries the check into the computation."""
     ok = ~jnp.isnan(value)
     if finite:
         ok = ok & jnp.isfinite(value)
@@ -232,8 +241,7 @@ def checked_number(name: str, value, *, low: float | None = None, high: float | 
     if high is not None:
         ok = ok & ((value < high) if high_open else (value <= high))
     bounds = _describe(low, high, low_open, high_open)
-    return eqx.error_if(value, ~ok, f"{name} must be a {'finite ' if finite else ''}number"
-                                    f"{' ' + bounds if bounds else ''} ({_RUNTIME})")
+    return ok, f"{name} must be a {'finite ' if finite else ''}number{' ' + bounds if bounds else ''} ({_RUNTIME})"
 
 
 def checked_finite(name: str, array, *, error: type[Exception] = NonFiniteError):

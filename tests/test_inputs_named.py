@@ -199,3 +199,21 @@ def test_traced_inputs_refused_when_the_program_runs(ico):
         jax.jit(jax.grad(lambda mu: _loss(ico, mu)))(jnp.asarray(-5.0))
     with pytest.raises(RUNTIME_ERRORS, match="V has non-finite entries"):
         jax.jit(jax.grad(lambda V: _loss(ico, V=V)))(V.at[4, 1].set(jnp.nan))
+
+
+def test_traced_solver_options_checked_when_the_program_runs():
+    """Options of the optimistix minimisers that are traced (under jit) pass ``__check_init__`` unseen; they are
+    checked when the program runs, naming the option (was: a negative tolerance or c2 ≥ 1 ran silently)."""
+    S = GeneralizedStiefel(np.ones(6), 2)
+    X0 = jnp.eye(6, 2)
+
+    def solve(atol, c2):
+        return optx.minimise(_sum_of_squares, stiefel.RiemannianLBFGS(S, 0.0, atol, c2=c2), X0, max_steps=5,
+                             throw=False).value
+
+    run = jax.jit(solve)
+    assert np.all(np.isfinite(np.asarray(run(1e-6, 0.9))))
+    with pytest.raises(RUNTIME_ERRORS, match=r"atol must be a finite number ≥ 0(\.0)? \(checked when the program runs"):
+        run(-1.0, 0.9)
+    with pytest.raises(RUNTIME_ERRORS, match=r"c2 must be a finite number in \(0, 1\)|c2 must be a finite number"):
+        run(1e-6, 1.5)

@@ -49,7 +49,8 @@ from ..manifolds.manifold import GeneralizedStiefel
 from .preconditioning import PRECONDITIONING_MODES
 from ..manifolds.product import Product
 from ..result import Status
-from ..validation import (check_count, check_nonnegative, check_positive, check_unit_interval, check_wolfe, is_traced_value)
+from ..validation import (check_count, check_nonnegative, check_positive, check_unit_interval, check_wolfe, is_traced_value,
+                          known_value, traced_range)
 
 __all__ = ["RiemannianCG", "RiemannianLBFGS", "RiemannianBB", "STALL_WINDOW_MAX", "to_optx_result", "settled_status"]
 
@@ -162,10 +163,30 @@ class _RiemannianMinimiser(optx.AbstractMinimiser):
             w = w.item()
             check_count("ftol_window", int(w) if isinstance(w, float) and w.is_integer() else w, 1, STALL_WINDOW_MAX)
 
+    def _ranges(self) -> list:
+        """``(name, value, range keywords of check_number)`` of the runtime options."""
+        rules = [(name, getattr(self, name), dict(low=0.0)) for name in ("rtol", "atol", "ftol", "xtol")]
+        return rules + [("init_step", self.init_step, dict(low=0.0, low_open=True)),
+                        ("max_move", self.max_move, dict(low=0.0, low_open=True, finite=False)),
+                        ("c1", self.c1, dict(low=0.0, high=1.0, low_open=True, high_open=True)),
+                        ("c2", self.c2, dict(low=0.0, high=1.0, low_open=True, high_open=True))]
+
+    def _checked_start(self, y):
+        """``y`` carrying the range checks of the options that are traced (unknown when the solver was built, so
+        ``__check_init__`` let them pass): they fail when the program runs, naming the option."""
+        for name, value, rule in self._ranges():
+            if is_traced_value(value) and known_value(value) is None:
+                ok, message = traced_range(name, value, **rule)
+                y = eqx.error_if(y, ~ok, message)
+        if is_traced_value(self.c1) or is_traced_value(self.c2):
+            y = eqx.error_if(y, ~(self.c1 < self.c2), "c1 < c2 is required (the strong Wolfe constants; checked "
+                                                      "when the program runs: the values are traced)")
+        return y
+
     # --- optimistix protocol -------------------------------------------------------------------
     def init(self, fn, y, args, options, f_struct, aux_struct, tags) -> State:
         self.manifold.check_shape(y, name="y0")  # where the start enters the solver (shapes only: works traced)
-        return _steps.init_state(self, fn, y, args)
+        return _steps.init_state(self, fn, self._checked_start(y), args)
 
     def step(self, fn, y, args, options, state: State, tags):
         state = _steps.step(self, fn, args, state)
@@ -212,6 +233,9 @@ class RiemannianBB(_RiemannianMinimiser):
 
     def __check_init__(self):
         check_unit_interval("bb_gamma", self.bb_gamma, closed=True)
+
+    def _ranges(self) -> list:
+        return super()._ranges() + [("bb_gamma", self.bb_gamma, dict(low=0.0, high=1.0))]
 
 
 METHOD_CLASSES = {"cg": RiemannianCG, "lbfgs": RiemannianLBFGS, "bb": RiemannianBB}
