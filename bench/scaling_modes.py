@@ -11,9 +11,9 @@ goal "total ≤ 20× eigsh"), then ``compressed_modes(lap, k, 2λ_(k−1))`` wit
 solve seconds (compile apart), iterations, status, t₁ (seconds until the true objective is within 1e-3,
 relative, of the final one), the ratio of solve (+ compile) to eigsh, and peak RSS. A level that does not
 finish within ``--timeout`` seconds is reported as such; a level whose process fails stops the run with nothing
-written. Subdivided meshes are cached as in ``bench.scaling``. Writes ``docs/benchmarks/scaling-modes.md`` and
-``docs/benchmarks/scaling-modes.json``; with ``--merge`` the rows already there for other (mesh, level) pairs are
-kept (each row names its mesh, date and command).
+written. Subdivided meshes are cached as in ``bench.scaling`` (``bench.subdivided_meshes``). Writes
+``docs/benchmarks/scaling-modes.md`` and ``docs/benchmarks/scaling-modes.json``; with ``--merge`` the rows already
+there for other (mesh, level) pairs are kept (each row names its mesh, date and command).
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ def worker(base: str, level: int, k: int, cache: str) -> dict:
 
     jax.config.update("jax_enable_x64", True)
     import mesh  # noqa: PLC0415
-    from bench.scaling import subdivided  # noqa: PLC0415
+    from bench.subdivided_meshes import subdivided  # noqa: PLC0415
     from objectives.cmm.modes import compressed_modes, first_eigenpairs, unpack_laplacian  # noqa: PLC0415
 
     V, F, _ = subdivided(base, level, Path(cache))
@@ -93,7 +93,7 @@ def report(rows: list[dict], meta: dict) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from bench.scaling import default_cache  # noqa: PLC0415
+    from bench.subdivided_meshes import default_cache  # noqa: PLC0415
 
     p = argparse.ArgumentParser(prog="python -m bench scaling-modes", description=__doc__.splitlines()[0])
     p.add_argument("--base", default="example:bumpy")
