@@ -362,6 +362,19 @@ def _newton(prob: _Restricted, Phi, gtol_abs: float, scale: float, budget: int, 
         WPhi, f = W_trial, f_trial
 
 
+def _start(prob: _Restricted, Psi):
+    """The first point on the support: Ψ cut to the support and restored, its entries taking the signs they have
+    there — small entries that the restoration moved across zero keep their new sign rather than leaving the
+    support (dropping them and restoring again failed on hand_868 from the block modes, k = 10, μ = 2λ: the cut
+    removed what had kept two barely overlapping modes orthogonal). ``(Φ, mask, signs)``, or None."""
+    Z = prob.restore(prob.mask * Psi, prob.mask)
+    if Z is None:  # the orthant-wise retraction, as the Newton steps use it
+        start = prob.orthant_retract(Psi)
+        return None if start is None else (start[0], start[1], prob.signs)
+    mask = prob.mask * (Z != 0.0)
+    return Z, mask, np.sign(Z) * mask
+
+
 def finish_support(W, a: Float[np.ndarray, " n"], w: Float[np.ndarray, " n"], mu: float,
                    Psi: Float[np.ndarray, "n k"], options: SupportFinish = SupportFinish(),
                    sigma: float | None = None) -> FinishResult:
@@ -398,13 +411,13 @@ def _finish(W, a, w, mu: float, Psi, options: SupportFinish, sigma: float | None
     status = "max_rounds"
     prob = _Restricted(W, a, w, mu, mask, signs, sigma)
     trace: list = []
-    start = prob.orthant_retract(Psi)
+    start = _start(prob, Psi)
     Phi = None if start is None else start[0]
     if start is None:
         status = "retraction_failed"
     else:
         removed += int(np.sum(mask - start[1]))
-        prob.set_support(start[1], signs)
+        prob.set_support(start[1], start[2])
     while Phi is not None and rounds < options.max_rounds:
         rounds += 1
         Phi, WPhi, steps, n_cg, dropped, n_added, st = _newton(
