@@ -20,13 +20,16 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy loads (via me
 from mesh import Mesh  # noqa: E402
 from bench.meshes import load_mesh, mesh_path  # noqa: E402
 
-__all__ = ["Claim", "Context", "VERDICTS", "MODULES"]
+__all__ = ["Claim", "Context", "VERDICTS", "RULES", "MODULES"]
 
 #: the verdicts a claim can get ("error": the measurement raised; the report shows the exception)
 VERDICTS = ("reproduced", "qualitatively", "differs", "not checkable", "error")
 
-#: the chapter modules, in report order
-MODULES = ("bench.thesis.chapter3_4", "bench.thesis.chapter5_6", "bench.thesis.chapter7_8")
+#: the parts of the verdict rule (``bench.thesis.report.RULE``); "" only for "error" rows and old-style claims
+RULES = ("number", "count", "identity", "composite", "none", "")
+
+#: the chapter modules, in report order (``extra_claims``: the cheap checks of results the figures do not show)
+MODULES = ("bench.thesis.chapter3_4", "bench.thesis.chapter5_6", "bench.thesis.chapter7_8", "bench.thesis.extra_claims")
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -39,7 +42,10 @@ class Claim:
     thesis: the thesis's number or statement; ours: our measured number; setting: mesh (and which thesis mesh
     it stands for), k, μ, starts, budgets; verdict: one of ``VERDICTS``; reason: for "qualitatively" and
     "differs" the measured reason or the setting that reproduces the thesis (for "reproduced", optional notes);
-    figures: PNG paths relative to ``docs/`` (``Context.save_figure``); seconds: the measurement's wall time.
+    figures: PNG paths relative to ``docs/`` (``Context.save_figure``); seconds: the measurement's wall time;
+    rule and basis: which part of the report's verdict rule decided the verdict (``RULES``) and the numbers it
+    was decided from — set together with the verdict by ``bench.thesis.report``'s ``by_number``, ``by_count``,
+    ``by_identity``, ``composite`` and ``worst`` (``Judgement.kwargs()``).
     """
 
     key: str
@@ -51,10 +57,14 @@ class Claim:
     reason: str = ""
     figures: list[str] = dataclasses.field(default_factory=list)
     seconds: float = 0.0
+    rule: str = ""
+    basis: str = ""
 
     def __post_init__(self) -> None:
         if self.verdict not in VERDICTS:
             raise ValueError(f"claim {self.key!r}: verdict must be one of {VERDICTS}, got {self.verdict!r}")
+        if self.rule not in RULES:
+            raise ValueError(f"claim {self.key!r}: rule must be one of {RULES}, got {self.rule!r}")
 
 
 @dataclasses.dataclass

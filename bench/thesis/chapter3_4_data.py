@@ -26,7 +26,7 @@ from objectives.cmm.solvers import ADMMCMM, Start
 from objectives.evaluation import a_orthonormalize, principal_angles, reconstruct, reconstruction_error
 from stiefel.manifolds.signs import canonical_signs
 
-__all__ = ["FUNCTIONS", "CMMRun", "solve_cmm", "mu_sweep", "Chapter4", "chapter4", "reconstruction_table",
+__all__ = ["FUNCTIONS", "CMMRun", "solve_cmm", "mu_sweep", "mu_random_starts", "Chapter4", "chapter4", "reconstruction_table",
            "method_sweep", "incremental_errors", "grassmann_matrix", "grassmann_unit_gl", "basis_reconstruction",
            "lbo_family_errors", "sparsity"]
 
@@ -57,12 +57,15 @@ class CMMRun:
     support_area: float
 
 
-def solve_cmm(lap, k: int, mu: float, evals, evecs, *, max_iters: int, time_limit: float) -> CMMRun:
-    """k CMMs by ADMM (thesis Algorithm 3, exact A-norm form) from the first k eigenfunctions."""
+def solve_cmm(lap, k: int, mu: float, evals, evecs, *, max_iters: int, time_limit: float, X0=None) -> CMMRun:
+    """k CMMs by ADMM (thesis Algorithm 3, exact A-norm form) from the first k eigenfunctions, or from ``X0``
+    ((n, k), A-orthonormal) with the same ρ₀ (2λ_k from ``evals``)."""
     W, a = unpack_laplacian(lap)
     solver = ADMMCMM(max_iters=max_iters, time_limit=time_limit)
     t0 = time.perf_counter()
-    run = solver.solve(W, a, k, mu, Start("eigen", np.asarray(evecs[:, :k]), np.asarray(evals[:max(k, 2)])))
+    start = Start("eigen", np.asarray(evecs[:, :k]), np.asarray(evals[:max(k, 2)])) if X0 is None else \
+        Start("random", np.asarray(X0), np.asarray(evals[:max(k, 2)]))
+    run = solver.solve(W, a, k, mu, start)
     seconds = time.perf_counter() - t0
     P = run.Psi
     dir_cols = np.sum(P * (W @ P), axis=0)
@@ -80,6 +83,16 @@ def mu_sweep(lap, k: int, mu_over_n, *, max_iters: int, time_limit: float) -> tu
     runs = [solve_cmm(lap, k, float(r) * n, ev.evals, ev.evecs, max_iters=max_iters, time_limit=time_limit)
             for r in mu_over_n]
     return runs, ev.evecs[:, :k]
+
+
+def mu_random_starts(lap, k: int, mu: float, count: int, *, max_iters: int, time_limit: float) -> list[CMMRun]:
+    """Fig. 3.5's remark at one μ from ``count`` random starts (seeds 1 … count, Gaussian, A-orthonormalised),
+    with the eigenfunction start's ρ₀."""
+    ev = mesh.eigenbasis(lap, max(k, 2))
+    n = lap.W.shape[0]
+    return [solve_cmm(lap, k, mu, ev.evals, ev.evecs, max_iters=max_iters, time_limit=time_limit,
+                      X0=a_orthonormalize(np.random.default_rng(seed).standard_normal((n, k)), lap.A))
+            for seed in range(1, count + 1)]
 
 
 @dataclasses.dataclass

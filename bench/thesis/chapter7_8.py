@@ -6,11 +6,11 @@ Chapter 7 (fast approximation): ``chapter7_8_local`` — local functions and the
 §7.4's restricted LMHs; ``chapter7_8_admm`` — Algorithm 8 against ADMM (Tables 7.1–7.2, Fig. 7.5).
 Chapter 8 (key results): ``chapter7_8_ch8`` — each checkable key result, one claim each.
 
-Budgets (measured): full mode 3.1–3.2 minutes on the shared 2-core machine when it is otherwise idle (several
-times that while other jobs compete for the two cores): eigs of 500
-eigenpairs on fandisk ≈ 15 s, Table 7.1's runs — 3 random starts × ADMM/fast × exact/printed forms on fandisk,
-one printed pair on the humanoid — ≈ 135 s. ``ctx.quick``: 12–16 s (642-vertex generated meshes, 800 ADMM
-iterations; most of it the JAX compilations of the §6.1 and Algorithm 6 checks).
+Budgets: Table 7.1's runs dominate — 5 random starts × ADMM/fast × exact/printed forms on fandisk, 5 × the
+printed pair on the humanoid at ScapeMan001's size (12500) and at 3000 and 6000 vertices for the size trend; the
+full module's time is in the report's header (``docs/THESIS.md``: generated per module). ``ctx.quick``: 642-vertex
+generated meshes, 2 starts, 800 ADMM iterations (seconds, most of them the JAX compilations of the §6.1 and
+Algorithm 6 checks).
 Figures: ``ch7_8_*.png``.
 """
 
