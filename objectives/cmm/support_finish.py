@@ -366,11 +366,11 @@ def _start(prob: _Restricted, Psi):
     """The first point on the support: Ψ cut to the support and restored, its entries taking the signs they have
     there — small entries that the restoration moved across zero keep their new sign rather than leaving the
     support (dropping them and restoring again failed on hand_868 from the block modes, k = 10, μ = 2λ: the cut
-    removed what had kept two barely overlapping modes orthogonal). ``(Φ, mask, signs)``, or None."""
+    removed what had kept two barely overlapping modes orthogonal). ``(Φ, mask, signs)``, or None when the
+    restoration fails."""
     Z = prob.restore(prob.mask * Psi, prob.mask)
-    if Z is None:  # the orthant-wise retraction, as the Newton steps use it
-        start = prob.orthant_retract(Psi)
-        return None if start is None else (start[0], start[1], prob.signs)
+    if Z is None:
+        return None
     mask = prob.mask * (Z != 0.0)
     return Z, mask, np.sign(Z) * mask
 
