@@ -169,7 +169,8 @@ def test_finish_of_admm_not_worse_and_sparser(problem):
     W, a, w, mu, _ = problem
     admm = compressed_modes((W, a), K, mu, solver=ADMMCMM(max_iters=3000))
     fr = finish_support(W, a, w, mu, admm.modes)
-    assert fr.objective <= admm.objective
+    # ADMM's modes are at the minimum already: the finish may end on it in another last bit (measured: 1 ulp)
+    assert fr.objective <= admm.objective * (1.0 + 1e-14)
     assert fr.support["exact_zeros"] >= admm.sparsity["1e-6"] - 0.01
     assert np.abs(fr.Psi.T @ (a[:, None] * fr.Psi) - np.eye(K)).max() < 1e-12
 
