@@ -18,10 +18,10 @@ diagonal), so the tangent projection is ``P(V) = V − S∘(ΦΛ)`` with ``L_S(�
 backtracking on the true objective, and an orthant-wise retraction: entries that would cross zero are
 set to zero and leave ``S``, then ``ΦᵀAΦ = I`` is restored by Newton's method along ``S∘(ΦΛ)`` (zeros stay
 exactly zero). Zero entries that violate (9.9) (``|v_ij| > μ w_i``, ``v = 2WΦ − AΦΛ*``, Λ* the certifying
-multiplier of (9.10)) join ``S`` with the sign ``−sign v_ij`` once their violation is comparable to the gradient on ``S``; zeros of ``S`` whose projected
-step points out of their orthant leave ``S`` before the line search. It stops when the gradient on ``S`` is at
-round-off or the objective stalls; the exact stationarity residual (9.10) is the convergence measure
-("converged" only when it is at most ``tol``, else "stalled").
+multiplier of (9.10)) join ``S`` with the sign ``−sign v_ij`` once their violation is comparable to the gradient
+on ``S``; zeros of ``S`` whose projected step points out of their orthant leave ``S`` before the line search.
+It stops when the gradient on ``S`` is at round-off or the objective stalls; the exact stationarity residual
+(9.10) is the convergence measure ("converged" only when it is at most ``tol``, else "stalled").
 """
 
 from __future__ import annotations
