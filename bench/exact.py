@@ -8,8 +8,9 @@ Each problem is solved twice, in one process, on the same inputs:
 * ``admm``: ``compressed_modes(..., solver=ADMMCMM(time_limit=--admm-time))``, the project's ADMM as a user gets it
   (finished and certified like the default: its own iterate has no exact zeros).
 
-Problems: meshes (cotangent W, lumped A, unit area; k = ``--k``, μ = ``--mu-factor``·n, uniform ℓ1 weights — the
-configuration the held-out beetle/face runs used — from the first k eigenfunctions) and ManPG's 1-D compressed-modes
+Problems: meshes (cotangent W, lumped A, unit area; k = ``--k``, one panel per form of ``--mu``, read as
+``stiefel modes --mu`` reads it: ``0.01n`` — the configuration the held-out beetle/face runs used — and ``2λ``, the
+command's default; uniform ℓ1 weights; from the first k eigenfunctions) and ManPG's 1-D compressed-modes
 problem (Chen, Ma, So, Zhang 2020, §6.1; ``bench.suite_methods.manpg_problem``; ``μ‖X‖₁``, one random orthonormal
 start, seed 0, shared by both methods) for every n of ``--manpg``, r of ``--manpg-r`` and μ of ``--manpg-mu``
 (ManPG's 24 cases: n = 128 … 4096, r = 4, 10, μ = 0.1, 0.3), and RPN-CG's cases (Si & Huang; ``--rpn``: n = 64 …
@@ -49,11 +50,14 @@ from bench.environment import header_lines, results_path, run_meta, write_result
 from bench.meshes import load_mesh, require  # noqa: E402
 from bench.suite import shared_meshes  # noqa: E402
 from bench.suite_methods import manpg_problem  # noqa: E402
-from objectives.cmm.modes import compressed_modes  # noqa: E402
+from objectives.cmm.modes import compressed_modes, first_eigenpairs  # noqa: E402
+from stiefel_cmm.cli.outputs import parse_mu  # noqa: E402
 from objectives.cmm.solvers import ADMMCMM  # noqa: E402
 
 GENERATED = ("example:bumpy", "example:starfish", "example:torus", "example:patch")
-LOADS_NOT = ("cube_40k.obj",)  # bad input by design (non-manifold volume faces): rejected, not a problem
+LOADS_NOT = ("cube_40k.obj",)
+#: the meshes' μ panels: the held-out beetle/face runs' setting and the command's default (``stiefel modes``)
+DEFAULT_MUS = ("0.01n", "2λ")  # bad input by design (non-manifold volume faces): rejected, not a problem
 
 
 def problems(args):
@@ -68,11 +72,14 @@ def problems(args):
                         return W, a, r, mu, "area", "random"
                     yield f"{group}:{n}:{r}:{mu}", group, build
     for spec in args.mesh:
-        def build(spec=spec):
-            m, _ = load_mesh(spec)
-            lap = mesh.laplacian(m)
-            return lap.W, lap.A.diagonal(), args.k, args.mu_factor * m.n_vertices, "uniform", "eigen"
-        yield spec, "mesh", build
+        for mu_spec in args.mu:
+            def build(spec=spec, mu_spec=mu_spec):
+                m, _ = load_mesh(spec)
+                lap = mesh.laplacian(m)
+                W, a = lap.W, lap.A.diagonal()
+                lam = float(first_eigenpairs(W, a, max(args.k, 2))[0][-1]) if mu_spec.unit == "λ" else None
+                return W, a, args.k, mu_spec.resolve(m.n_vertices, lam), "uniform", "eigen"
+            yield (spec if len(args.mu) == 1 else f"{spec} @ {mu_spec.text}"), "mesh", build
 
 
 def run_problem(label: str, kind: str, build, args) -> dict:
@@ -102,6 +109,11 @@ def run_problem(label: str, kind: str, build, args) -> dict:
         trace=(fin.get("trace") or {}).get("rows", []))
 
 
+def _mus(meta: dict) -> str:
+    """The meshes' μ forms (results written before ``--mu`` recorded ``mu_factor``)."""
+    return " and ".join(meta["mu"]) if "mu" in meta else f"{meta['mu_factor']}·n"
+
+
 def _g(x, fmt=".3g"):
     return "—" if x is None else format(x, fmt)
 
@@ -109,7 +121,8 @@ def _g(x, fmt=".3g"):
 def report(meta: dict, rows: list[dict], traced: list[str]) -> str:
     lines = ["# The exactly sparse default against ADMM and the previous default", "", *header_lines(meta),
              f"* problems measured: {meta.get('problems_done', len(rows))}",
-             f"* meshes: k = {meta['k']}, μ = {meta['mu_factor']}·n, uniform ℓ1 weights, eigenfunction start; "
+             f"* meshes: k = {meta['k']}, μ = {_mus(meta)} (λ = λ_(k−1), as `stiefel modes --mu` reads them), "
+             "uniform ℓ1 weights, eigenfunction start; "
              "ManPG / RPN-CG: μ‖X‖₁, random orthonormal start (seed 0)",
              f"* ADMM: `ADMMCMM(time_limit={meta['admm_time']})` with the default finish (as a user gets it)",
              "* gap = objective / ADMM's − 1 (negative: lower than ADMM); previous = the smoothed modes before the "
@@ -152,7 +165,9 @@ def parse(argv):
     p.add_argument("--mesh", nargs="*", default=list(GENERATED), help="meshes (default: the generated examples)")
     p.add_argument("--all-shared", action="store_true", help="add every loadable mesh of ../shared/meshes")
     p.add_argument("--k", type=int, default=10)
-    p.add_argument("--mu-factor", type=float, default=0.01, help="meshes: μ = this × n (default 0.01)")
+    p.add_argument("--mu", type=parse_mu, nargs="+", default=[parse_mu(x) for x in DEFAULT_MUS],
+                   help="meshes: μ in the CLI's forms, each a panel (default: 0.01n 2λ — the held-out runs' "
+                        "setting and the command's default)")
     p.add_argument("--manpg", type=int, nargs="*", default=[128, 256], help="ManPG problem sizes n")
     p.add_argument("--manpg-r", type=int, nargs="*", default=[4, 10])
     p.add_argument("--manpg-mu", type=float, nargs="*", default=[0.1, 0.3])
@@ -169,7 +184,7 @@ def parse(argv):
 
 def main(argv=None) -> int:
     args = parse(argv)
-    meta = run_meta("bench exact", argv, k=args.k, mu_factor=args.mu_factor, admm_time=args.admm_time)
+    meta = run_meta("bench exact", argv, k=args.k, mu=[m.text for m in args.mu], admm_time=args.admm_time)
     rows = []
     for label, kind, build in problems(args):
         try:

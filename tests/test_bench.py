@@ -347,3 +347,19 @@ def test_exact_bench_report_states_gaps_status_and_the_finish_iterates():
     assert "| manpg:128:4:0.1 | error: ValueError: boom |" in page
     assert "Converged (residual ≤ 1e-8): 0 of 1." in page and "at or below ADMM × (1 + 1e-4): 0 of 1" in page
     assert "### The finish's iterates: rpn:64:5:0.1" in page and "| 1 | 1.78 | 8.0e-13 | 0.0e+00 | 56 | 0 |" in page
+
+
+def test_exact_bench_meshes_get_one_problem_per_mu_form():
+    """``bench exact --mu 0.01n 2λ``: each mesh is a problem per form, labelled with it, μ resolved as the command
+    resolves it (``2λ`` = 2 λ_(k−1) of the mesh's Laplacian); one form keeps the plain mesh label."""
+    from bench.exact import parse, problems  # noqa: PLC0415
+    from objectives.cmm.modes import first_eigenpairs  # noqa: PLC0415
+
+    args = parse(["--mesh", "example:patch", "--mu", "0.01n", "2λ", "--manpg", "--rpn", "--k", "3"])
+    built = {label: build() for label, kind, build in problems(args) if kind == "mesh"}
+    assert list(built) == ["example:patch @ 0.01n", "example:patch @ 2λ"]
+    W, a, k, mu_n, *_ = built["example:patch @ 0.01n"]
+    assert k == 3 and mu_n == pytest.approx(0.01 * a.shape[0])
+    assert built["example:patch @ 2λ"][3] == pytest.approx(2.0 * first_eigenpairs(W, a, 3)[0][-1], rel=1e-12)
+    one = parse(["--mesh", "example:patch", "--mu", "2λ", "--manpg", "--rpn"])
+    assert [label for label, *_ in problems(one)] == ["example:patch"]
