@@ -19,7 +19,8 @@ backtracking on the true objective, and an orthant-wise retraction: entries that
 set to zero and leave ``S``, then ``ΦᵀAΦ = I`` is restored by Newton's method along ``S∘(ΦΛ)`` (zeros stay
 exactly zero). Zero entries that violate (9.9) (``|v_ij| > μ w_i``, ``v = 2WΦ − AΦΛ*``, Λ* the certifying
 multiplier of (9.10)) join ``S`` with the sign ``−sign v_ij`` once their violation is comparable to the gradient
-on ``S``; zeros of ``S`` whose projected step points out of their orthant leave ``S`` before the line search.
+on ``S``; zeros of ``S`` whose projected step points out of their orthant leave ``S`` before the line search, and
+zeros dropped after a failed line search are not freed again before a step is taken.
 It stops when the gradient on ``S`` is at round-off or the objective stalls; the exact stationarity residual
 (9.10) is the convergence measure ("converged" only when it is at most ``tol``, else "stalled").
 """
@@ -263,6 +264,7 @@ def _newton(prob: _Restricted, Phi, gtol_abs: float, scale: float, budget: int, 
     steps = cg = dropped = added = 0
     recent = [f]  # objective values of the last STALL_WINDOW steps
     freed = np.zeros_like(prob.mask, dtype=bool)  # entries the violation rule freed (see the stuck rule)
+    blocked = np.zeros_like(freed)  # zeros dropped after a failed search, not re-freed until a step is taken
     while True:
         gram, lam, grad = prob.point(Phi, WPhi)
         gnorm = np.sqrt(prob.inner(grad, grad))
@@ -293,6 +295,7 @@ def _newton(prob: _Restricted, Phi, gtol_abs: float, scale: float, budget: int, 
                 gnorm = np.sqrt(prob.inner(grad, grad))
         # zero entries violating (9.9) join the support when their violation is comparable to the gradient
         violate, viol_norm, v = prob.violations(Phi, WPhi, margin)
+        violate &= ~blocked
         trace.append([f, gnorm / scale, viol_norm / scale, int(prob.mask.sum()), 0])
         if violate.any() and viol_norm >= ADD_RATIO * gnorm:
             added += int(violate.sum())
@@ -350,12 +353,14 @@ def _newton(prob: _Restricted, Phi, gtol_abs: float, scale: float, budget: int, 
             floor = -slope <= 1e-12 * max(abs(f), 1.0) or gnorm <= 1e3 * gtol_abs
             if not floor and zeros.any():  # freed zeros blocked every step: drop them and go on
                 dropped += int(zeros.sum())
+                blocked |= zeros
                 mask = prob.mask.copy()
                 mask[zeros] = 0.0
                 prob.set_support(mask, prob.signs)
                 continue
             return Phi, WPhi, steps, cg, dropped, added, ("converged" if floor else "line_search_failed")
         Phi, mask = found
+        blocked[:] = False
         recent = (recent + [f_trial])[-STALL_WINDOW:]
         if len(recent) == STALL_WINDOW and recent[0] - recent[-1] <= 1e-10 * max(abs(f_trial), 1.0):
             if np.any(mask != prob.mask):
