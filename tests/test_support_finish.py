@@ -237,6 +237,41 @@ def test_budget_exhausted_is_reported(problem):
     assert np.abs(fr.Psi.T @ (a[:, None] * fr.Psi) - np.eye(K)).max() < 1e-12
 
 
+def test_budget_exhausted_on_every_start_returns_the_lowest_objective(problem):
+    """No start converges within its budget: the lowest objective of the starts tried comes back, not converged."""
+    W, a, w, mu, smooth = problem
+    fr = finish_support(W, a, w, mu, smooth.modes, SupportFinish(max_newton=2, retry_thresholds=(1e-2, 1e-6)))
+    assert [t["threshold"] for t in fr.attempts] == [1e-4, 1e-2, 1e-6]
+    assert all(t["status"] != "converged" for t in fr.attempts) and fr.status != "converged"
+    assert fr.objective == min(t["objective"] for t in fr.attempts) <= fr.objective_before
+    assert fr.newton_iterations == sum(t["newton_iterations"] for t in fr.attempts)
+
+
+def test_a_failed_start_is_retried_from_the_next_threshold(problem, monkeypatch):
+    """The first start's Newton run fails (forced): the finish starts again from the next threshold, converges and
+    says which starts it tried; with ``retry_thresholds=()`` the failure is what comes back."""
+    import objectives.cmm.support_finish as finish
+
+    W, a, w, mu, smooth = problem
+    real, calls = finish._newton, []
+
+    def first_fails(prob, Phi, *args):
+        calls.append(int(prob.mask.sum()))
+        if len(calls) == 1:
+            return Phi, prob.matvec(Phi), 1, 0, 0, 0, "line_search_failed"
+        return real(prob, Phi, *args)
+
+    monkeypatch.setattr(finish, "_newton", first_fails)
+    fr = finish_support(W, a, w, mu, smooth.modes, SupportFinish(retry_thresholds=(1e-2, 1e-6)))
+    assert fr.status == "converged" and fr.stationarity.relative <= SupportFinish().tol
+    assert [t["threshold"] for t in fr.attempts] == [1e-4, 1e-2]
+    assert fr.attempts[0]["status"] != "converged" and fr.attempts[1]["status"] == "converged"
+    assert calls[1] < calls[0]  # the second start's support: the entries above 1e-2 of the peak, fewer
+    calls.clear()
+    one = finish_support(W, a, w, mu, smooth.modes, SupportFinish(retry_thresholds=()))
+    assert one.status != "converged" and len(one.attempts) == 1
+
+
 def test_support_stats():
     X = np.array([[1.0, 0.0], [0.0, 0.0], [2.0, -1.0]])
     st = support_stats(X, np.array([1.0, 1.0, 2.0]))
@@ -244,7 +279,9 @@ def test_support_stats():
 
 
 @pytest.mark.parametrize("opts", [dict(threshold=1.0), dict(threshold=-0.1), dict(gtol=float("nan")),
-                                  dict(max_rounds=0), dict(max_newton=1.5), dict(max_cg=0), dict(kkt_margin=-1.0)])
+                                  dict(max_rounds=0), dict(max_newton=1.5), dict(max_cg=0), dict(kkt_margin=-1.0),
+                                  dict(retry_thresholds=[1e-3]), dict(retry_thresholds=(1e-3, 1.0)),
+                                  dict(retry_thresholds=(float("nan"),))])
 def test_bad_options(opts):
     with pytest.raises(SolverOptionError):
         SupportFinish(**opts)

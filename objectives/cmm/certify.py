@@ -63,6 +63,6 @@ def certify(W, a: np.ndarray, w: np.ndarray, mu: float, Psi: np.ndarray, solver_
                   objective_before=fr.objective_before, objective=fr.objective, rounds=fr.rounds,
                   newton_iterations=fr.newton_iterations, cg_iterations=fr.cg_iterations, w_products=fr.w_products,
                   added=fr.added, removed=fr.removed, wall_time=fr.wall_time,
-                  violations=fr.stationarity.violations,
+                  violations=fr.stationarity.violations, attempts=fr.attempts,
                   trace=dict(columns=TRACE_COLUMNS, rows=fr.trace.tolist()))
     return Certified(fr.Psi, status, record, Psi, residual, fr.wall_time)
