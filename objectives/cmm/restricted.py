@@ -119,12 +119,15 @@ class _Restricted:
 
 def _truncated_cg(prob: _Restricted, gram, Phi, lam, grad, rtol: float, max_cg: int):
     """Preconditioned CG on ``Hess η = −grad`` in the tangent space (A-inner product); stops at
-    negative curvature (returns the iterate so far, or the preconditioned gradient at the first step)."""
+    negative curvature (returns the iterate so far, or the preconditioned gradient at the first step) and where the
+    preconditioned residual is not positive (``−grad`` if at the start)."""
     r = -grad
     z = prob.precondition(gram, Phi, r)
     p, eta = z, np.zeros_like(grad)
     rz = prob.inner(r, z)
     r0 = np.sqrt(max(prob.inner(r, r), 0.0))
+    if not rz > 0.0:  # the projected preconditioner lost definiteness (a singular Gram map): steepest descent
+        return r, 0
     it = 0
     for it in range(1, max_cg + 1):
         Hp = prob.hess(gram, Phi, lam, p)
@@ -140,6 +143,8 @@ def _truncated_cg(prob: _Restricted, gram, Phi, lam, grad, rtol: float, max_cg: 
             break
         z = prob.precondition(gram, Phi, r)
         rz_new = prob.inner(r, z)
+        if not rz_new > 0.0:  # (measured: ManPG n = 256, r = 10, μ = 0.1 from ADMM's modes — it divided by 0)
+            break
         p = z + (rz_new / rz) * p
         rz = rz_new
     return eta, it
