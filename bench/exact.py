@@ -26,8 +26,9 @@ and the first RPN-CG case).
     python -m bench exact                                     # generated meshes, ManPG n = 128, 256, RPN n = 64, 128
     python -m bench exact --all-shared --manpg 128 256 512 1024 2048 4096 --rpn 64 128 256 512
 
-Writes ``docs/benchmarks/exact.md`` and ``exact.json`` when every problem is done (atomically, notes kept): an
-interrupted run never replaces the committed page (the rows are printed as they come).
+Writes ``docs/benchmarks/<--out>.md`` and ``.json`` (committed: ``exact-meshes``, ``exact-schrodinger``) when every
+problem is done (atomically, notes kept): an interrupted run never replaces the committed page (the rows are printed as
+they come).
 """
 
 from __future__ import annotations
