@@ -52,13 +52,13 @@ from bench.meshes import load_mesh, require  # noqa: E402
 from bench.suite import shared_meshes  # noqa: E402
 from bench.suite_methods import manpg_problem  # noqa: E402
 from objectives.cmm.modes import compressed_modes, first_eigenpairs  # noqa: E402
-from stiefel_cmm.cli.outputs import parse_mu  # noqa: E402
 from objectives.cmm.solvers import ADMMCMM  # noqa: E402
+from stiefel_cmm.cli.outputs import parse_mu  # noqa: E402
 
 GENERATED = ("example:bumpy", "example:starfish", "example:torus", "example:patch")
-LOADS_NOT = ("cube_40k.obj",)
+LOADS_NOT = ("cube_40k.obj",)  # bad input by design (non-manifold volume faces): rejected, not a problem
 #: the meshes' μ panels: the held-out beetle/face runs' setting and the command's default (``stiefel modes``)
-DEFAULT_MUS = ("0.01n", "2λ")  # bad input by design (non-manifold volume faces): rejected, not a problem
+DEFAULT_MUS = ("0.01n", "2λ")
 
 
 def problems(args):

@@ -38,6 +38,7 @@ class _Restricted:
         """A new support and sign pattern (no refactoring: the preconditioner does not depend on them)."""
         self.mask, self.signs = mask.copy(), signs * mask
         self.lin = self.mu * self.w[:, None] * self.signs  # μ w∘s on the support
+
     def violations(self, Phi, WPhi, margin: float):
         """Zero entries violating (9.9) (``|v_ij| > (1 + margin) μ w_i``, ``v = 2WΦ − AΦΛ*``), the
         ``A⁻¹``-norm of their excess and v. Λ* is the certifying multiplier of (9.10) (``l1_stationarity``),

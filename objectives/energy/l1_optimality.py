@@ -203,6 +203,8 @@ def l1_stationarity(W, a: Float[np.ndarray, " n"], w: Float[np.ndarray, " n"], m
         v = G - a[:, None] * (Phi @ Lam)
         active = (~zero) | (np.abs(v) > t)
         grad = Phi.T @ q  # −∂φ/∂Λ, symmetrised inside solve
+        if not np.any(grad + grad.T):  # ∇φ = 0: the minimum (no step, shifted or not, can descend)
+            break
         gram = MaskedGram(Phi, a, active.astype(np.float64))
         shift, accepted = 0.0, False
         for _ in range(LM_TRIES):
