@@ -23,6 +23,8 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
                              "zeros, time, ratios to ADMM"),
     "exact": ("bench.exact", "the default (exactly sparse, certified) CMM answer against ADMM and the previous "
                              "smoothed default: meshes, ManPG's 24 cases, RPN-CG's; the finish's iterates"),
+    "starts": ("bench.starts", "the default's screen of rotated eigenbasis starts against each start solved alone: "
+                               "objectives, the pick, the cost"),
     "cmm": ("bench.bench_cmm", "the block manifold solver's variants against ADMM: time to ADMM's best objective"),
     "scaling": ("bench.scaling", "subdivided surfaces up to ~10⁶ vertices: assembly, eigsh, ms per iteration, "
                                  "fitted exponents, memory"),

@@ -363,3 +363,31 @@ def test_exact_bench_meshes_get_one_problem_per_mu_form():
     assert built["example:patch @ 2λ"][3] == pytest.approx(2.0 * first_eigenpairs(W, a, 3)[0][-1], rel=1e-12)
     one = parse(["--mesh", "example:patch", "--mu", "2λ", "--manpg", "--rpn"])
     assert [label for label, *_ in problems(one)] == ["example:patch"]
+
+
+def test_starts_bench_row_and_page_on_a_small_problem():
+    """``bench starts`` on a small mesh: the default and each of its 4 starts alone, the default's objective no
+    higher than the start it picked solved alone, and a page naming the pick; meshes only (no Schrödinger cases)."""
+    from bench import starts  # noqa: PLC0415
+    from bench.exact import problems  # noqa: PLC0415
+
+    args = starts.parse(["--mesh", "example:patch", "--mu", "0.01n", "--k", "3"])
+    cases = list(problems(args))
+    assert [(label, kind) for label, kind, _ in cases] == [("example:patch", "mesh")]
+    W, a, k, mu, weighting, start = cases[0][2]()
+
+    def small():
+        keep = np.arange(400)  # a 400-vertex piece of the patch: the first rows and columns of its Laplacian
+        Ws = W[keep][:, keep].tolil()
+        Ws.setdiag(0)
+        Ws = Ws.tocsr()
+        Ws = Ws - __import__("scipy").sparse.diags_array(np.asarray(Ws.sum(axis=1)).ravel())
+        return Ws, a[keep], k, mu, weighting, start
+
+    row = starts.run_problem("piece", small, 4)
+    assert len(row["alone"]) == 4 and len(row["screen"]) == 4 and 0 <= row["chosen"] < 4
+    assert row["objective"] <= row["alone"][row["chosen"]]["objective"] * (1 + 1e-8)
+    page = starts.report({"date": "d", "machine": "m", "jax": "j", "scipy": "s", "numpy": "n", "command": "c",
+                          "k": 3, "mu": ["0.01n"]}, [row, dict(problem="bad", error="ValueError: x")])
+    assert f"| piece | 400 | {mu:.3g} |" in page and "| bad | error: ValueError: x |" in page
+    assert "within 1e-4 of the best start alone" in page

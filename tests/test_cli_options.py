@@ -42,7 +42,7 @@ def test_parse_mu_units() -> None:
 def test_options_reach_the_solver_and_the_summary(tmp_path: Path) -> None:
     out = tmp_path / "o"
     argv = ["modes", SMALL, "-k", "3", "--smoothing", "logcosh", "--eps", "0.01", "--delta", "0.02",
-            "--continuation", "2", "--continuation-start", "0.05", "--optimizer", "lbfgs", "--weights", "graph",
+            "--continuation", "2", "--continuation-start", "0.05", "--optimizer", "lbfgs", "--starts", "2", "--weights", "graph",
             "--area", "uniform", "--weighting", "uniform", "--mu", "1.5λ", "--start", "random", "--out", str(out),
             *FAST]
     assert main(argv) == 0
@@ -50,6 +50,7 @@ def test_options_reach_the_solver_and_the_summary(tmp_path: Path) -> None:
     opts = s["solver_options"]
     assert opts["smoothing"] == "f8" and opts["eps"] == 0.01 and opts["delta"] == 0.02
     assert opts["continuation"] == 2 and opts["continuation_start"] == 0.05 and opts["optimizer"] == "lbfgs"
+    assert opts["starts"] == 2
     params = s["parameters"]
     assert params["smoothing"] == "f8" and params["optimizer"] == "lbfgs" and params["start"] == "random"
     assert "graph weights, uniform areas" in params["laplacian"] and params["weighting"] == "uniform"
@@ -98,6 +99,10 @@ def test_bad_options_are_named_before_any_work(tmp_path: Path, capsys: pytest.Ca
     assert "unknown smoothing 'nope'" in _error(capsys)
     assert main(["modes", "--method", "admm", "--optimizer", "lbfgs", "--out", str(tmp_path / "c")]) == 1
     assert "--optimizer applies to --method block, not admm" in _error(capsys)
+    assert main(["modes", "--method", "sequential", "--starts", "2", "--out", str(tmp_path / "s")]) == 1
+    assert "--starts applies to --method block, not sequential" in _error(capsys)
+    assert main(["modes", "--starts", "65", "--out", str(tmp_path / "s")]) == 2
+    assert "expected an integer in [1, 64], got 65" in _error(capsys)
     assert main(["modes", "--method", "fast", "--eps", "0.1", "--out", str(tmp_path / "d")]) == 1
     assert "--eps applies to --method block or sequential" in _error(capsys)
     assert main(["modes", "--mu", "1", "--target-sparsity", "0.5"]) == 2

@@ -31,7 +31,8 @@ def hand():
 @pytest.fixture(scope="module")
 def hand_block(hand):
     """The default block solve on the hand (k = 6, μ = HAND_MU·n, uniform weighting), shared by the
-    tests that compare with it: 98 iterations, objective 184.2586, 15 % of entries below 1e-3·peak."""
+    tests that compare with it: 200 iterations (4 starts screened, the chosen one's 98), objective 184.2571,
+    15 % of entries below 1e-3·peak."""
     return compressed_modes(hand, 6, HAND_MU * hand.n, weighting="uniform")
 
 
@@ -146,24 +147,66 @@ def test_bad_parameters(hand):
         BlockCMM(stage_window=0)
 
 
-def test_block_continuation_stops_intermediate_stages_early(hand, hand_block):
-    """Default block solve: 4 smoothing stages, the first three stopped by stage_ftol over
+def test_block_continuation_stops_intermediate_stages_early(hand):
+    """Block solve of one start: 4 smoothing stages, the first three stopped by stage_ftol over
     stage_window iterations; the last runs to gtol/ftol, so the objective is that of the
     single-stage solve (hand stand-in, k = 6, μ = 0.02n: 98 iterations against 121 single-stage
     and 116 with the intermediate stages run to the tight tolerance; hand_868 at μ = 0.01n: 95, 116, 122)."""
     mu = HAND_MU * hand.n
-    one = compressed_modes(hand, 6, mu, solver=BlockCMM(continuation=1), weighting="uniform")
-    res = hand_block
-    full_stages = compressed_modes(hand, 6, mu, solver=BlockCMM(stage_ftol=1e-9), weighting="uniform")
+    one = compressed_modes(hand, 6, mu, solver=BlockCMM(continuation=1, starts=1), weighting="uniform")
+    res = compressed_modes(hand, 6, mu, solver=BlockCMM(starts=1), weighting="uniform")
+    full_stages = compressed_modes(hand, 6, mu, solver=BlockCMM(stage_ftol=1e-9, starts=1), weighting="uniform")
     assert res.params["continuation"] == 4 and one.params["continuation"] == 1
     assert res.params["stage_ftol"] == 3e-4 and res.params["stage_window"] == 5
     assert res.status == "converged" and res.orthogonality <= 1e-10
     assert abs(res.objective - one.objective) <= 1e-6 * one.objective
     assert abs(full_stages.objective - one.objective) <= 1e-6 * one.objective
     assert res.iterations < full_stages.iterations
+    assert "screened_starts" not in res.params
     h = res.history  # one entry per iterate: a stage's start is the previous stage's end
     assert len(h["time"]) == len(h["objective"]) == res.iterations + 1
     assert np.all(np.diff(h["time"]) >= 0)
+
+
+def test_block_screens_rotated_starts_and_goes_on_from_the_lowest(hand, hand_block):
+    """The default screens the eigenbasis and 3 rotations of it through the intermediate stages and
+    finishes the start whose true objective is lowest there: the same solve as that rotation given as
+    an array start with ``starts=1``; the iterations are those of every screen plus the last stage's, the
+    history the chosen start's."""
+    res = hand_block
+    screened = res.params["screened_starts"]
+    assert res.params["starts"] == 4 and len(screened) == 4
+    assert [c["status"] for c in screened] == ["converged"] * 4
+    chosen = [j for j, c in enumerate(screened) if c["chosen"]]
+    assert len(chosen) == 1 and screened[chosen[0]]["objective"] == min(c["objective"] for c in screened)
+    others = sum(c["iterations"] for j, c in enumerate(screened) if j != chosen[0])
+    assert len(res.history["objective"]) == res.iterations - others + 1
+    assert res.history["objective"][screened[chosen[0]]["iterations"]] == screened[chosen[0]]["objective"]
+    # the chosen start, solved alone
+    from objectives.cmm.block_stages import rotated_starts  # noqa: PLC0415
+    from objectives.cmm.modes import first_eigenpairs  # noqa: PLC0415
+    _, U = first_eigenpairs(hand.W, hand.A.diagonal(), 6)
+    X0 = rotated_starts(U, 4, 0)[chosen[0]]
+    alone = compressed_modes(hand, 6, HAND_MU * hand.n, weighting="uniform", start=X0, solver=BlockCMM(starts=1))
+    assert "screened_starts" not in alone.params  # an array start is used as given
+    assert abs(alone.objective - res.objective) <= 1e-9 * res.objective
+    assert alone.iterations == res.iterations - others
+    # rotations keep the span and the A-orthonormality
+    for X in rotated_starts(U, 4, 0):
+        np.testing.assert_allclose(X.T @ (hand.A @ X), np.eye(6), atol=1e-12)
+        np.testing.assert_allclose(U @ (U.T @ (hand.A @ X)), X, atol=1e-10)
+
+
+def test_block_screen_with_one_stage_and_a_random_start(hand):
+    """One smoothing stage: each start's screen is a first run of that stage with the intermediate stop; a random
+    start is screened with its rotations too; k = 1 has nothing to rotate."""
+    mu = HAND_MU * hand.n
+    res = compressed_modes(hand, 6, mu, solver=BlockCMM(continuation=1, starts=2), weighting="uniform",
+                           start="random", seed=3)
+    assert res.status == "converged" and len(res.params["screened_starts"]) == 2
+    assert res.iterations > sum(c["iterations"] for c in res.params["screened_starts"])  # and the last stage
+    single = compressed_modes(hand, 1, mu, solver=BlockCMM(starts=3), weighting="uniform", finish=None)
+    assert "screened_starts" not in single.params and single.status == "converged"
 
 
 @pytest.fixture(scope="module")

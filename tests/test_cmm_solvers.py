@@ -45,6 +45,8 @@ BAD_OPTIONS = [
     (lambda U: SequentialCMM(max_iters=0), "max_iters must be an integer ≥ 1"),
     (lambda U: BlockCMM(max_iters=10.5), "max_iters must be an integer ≥ 1"),
     (lambda U: BlockCMM(continuation=0), "continuation"),
+    (lambda U: BlockCMM(starts=0), "starts must be an integer ≥ 1 and ≤ 64"),
+    (lambda U: BlockCMM(starts=True), "starts must be an integer"),
     (lambda U: SequentialCMM(continuation_start=0.0), "continuation_start must be a finite number > 0"),
     (lambda U: BlockCMM(stage_window=0), "stage_window must be an integer ≥ 1"),
     (lambda U: BlockCMM(stage_ftol=-1.0), "stage_ftol must be a finite number ≥ 0"),
@@ -77,7 +79,7 @@ def test_each_solver_rejects_bad_options_on_construction(demo, make, match):
 
 
 FIELDS = {
-    BlockCMM: {"smoothing", "eps", "delta", "gtol", "ftol", "max_iters", "continuation", "continuation_start",
+    BlockCMM: {"smoothing", "eps", "delta", "gtol", "ftol", "max_iters", "continuation", "continuation_start", "starts",
                "stage_ftol", "stage_window", "optimizer", "preconditioner", "preconditioner_shift", "refresh",
                "runtime_smoothing", "bucket_growth", "saddle_checks", "saddle_ftol", "saddle_tol", "polish",
                "polish_gtol", "polish_iters"},
@@ -258,10 +260,10 @@ def test_cmm_result_prints_one_line(demo):
 def test_block_intermediate_stage_line_search_failure_hands_on(demo, monkeypatch):
     """A smoothing stage before the last whose line search failed passes its iterate on; the solve's status is the
     last stage's (``converged`` here), while a failure in the last stage is the solve's status."""
-    from objectives import cmm_manifold  # noqa: PLC0415
+    from objectives.cmm import block_stages  # noqa: PLC0415
 
     lap, _ = demo
-    real = cmm_manifold._block_rounds
+    real = block_stages.block_rounds
     for failing, expected in ((1, "converged"), (2, "line_search_failed")):  # stage 1 of 2, then the last
         calls = []
 
@@ -270,7 +272,7 @@ def test_block_intermediate_stage_line_search_failure_hands_on(demo, monkeypatch
             calls.append(out[2])
             return (*out[:2], "line_search_failed", *out[3:]) if len(calls) == failing else out
 
-        monkeypatch.setattr(cmm_manifold, "_block_rounds", rounds)
-        res = compressed_modes(lap, K, 0.01 * lap.n, solver=BlockCMM(continuation=2, saddle_checks=0),
+        monkeypatch.setattr(block_stages, "block_rounds", rounds)
+        res = compressed_modes(lap, K, 0.01 * lap.n, solver=BlockCMM(continuation=2, saddle_checks=0, starts=1),
                                weighting="uniform", finish=None)  # the smoothed solver's own status
         assert len(calls) == 2 and res.status == expected, (failing, res.status)

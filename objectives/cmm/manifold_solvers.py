@@ -26,7 +26,7 @@ from stiefel.solvers.minimisers import STALL_WINDOW_MAX
 from stiefel.linalg.operators import SparseOperator
 
 from . import newton as cmm_newton
-from . import saddle as cmm_saddle
+from . import block_stages as stages
 from ..energy import smoothings
 from .active_set import ActiveSetPreconditioner
 from ..admm.splitting import l1_weights_np, orthonormalize
@@ -45,65 +45,6 @@ def _continuation(eps: float, steps: int, start: float) -> list[float]:
     if steps <= 1 or start <= eps:
         return [eps]
     return list(np.geomspace(start, eps, steps))
-
-
-def _block_rounds(F, manifold, X, P, *, gtol: float, ftol: float, max_iters: int, budget: int,
-                  refresh: int | None = None, optimizer: str = "cg", ftol_window: int = 20, progress=None, stop=None):
-    """Riemannian CG/L-BFGS (``optimizer``) on the block for at most ``budget ≤ max_iters`` iterations, in one
-    run (fixed ``P``) or in rounds of ``refresh`` iterations with an ``ActiveSetPreconditioner`` rebuilt
-    before each round. ``max_iters`` is the compiled bound (the same for every call: one compilation).
-
-    ``progress(stiefel.Progress)`` and ``stop`` go to ``stiefel.minimize`` (``iteration`` counts this call's
-    iterations; the caller adds its offset).
-
-    Returns ``(X, iterations, status, run seconds (incl. refreshes), compile seconds,
-    history {"time", "value", "monitor"})``; a round that ends converged or interrupted ends the run.
-    """
-    if not isinstance(P, ActiveSetPreconditioner):
-        res = stiefel.minimize(F, manifold, X, method=optimizer, preconditioner=P, gtol=gtol, ftol=ftol,
-                               ftol_window=ftol_window, max_iters=max_iters, budget=budget, monitor=F.true_value,
-                               progress=progress, stop=stop, check=False)  # X: A-orthonormalised by the caller
-        h = res.trimmed_history()
-        h["time"] = np.linspace(0.0, res.wall_time, len(h["value"]))
-        return res.x, int(res.iterations), res.status_name, res.wall_time, res.compile_time, h
-    done, wall, compile_t, status = 0, 0.0, 0.0, "max_iters"
-    parts: dict = {"time": [], "value": [], "monitor": []}
-    bound = min(refresh, max_iters)
-    while done < budget:
-        t0 = time.perf_counter()
-        P.refresh(X)
-        wall += time.perf_counter() - t0
-        shifted = None if progress is None else (lambda info, d=done: progress(info._replace(iteration=d + info.iteration)))
-        res = stiefel.minimize(F, manifold, X, method=optimizer, preconditioner=P.apply, gtol=gtol, ftol=ftol,
-                               ftol_window=ftol_window, max_iters=bound, budget=min(bound, budget - done),
-                               monitor=F.true_value, check=False, progress=shifted, stop=stop)
-        h = res.trimmed_history()
-        first = 0 if done == 0 else 1  # a later round's entry 0 repeats the previous round's last
-        parts["time"].append(wall + np.linspace(0.0, res.wall_time, len(h["value"]))[first:])
-        parts["value"].append(h["value"][first:])
-        parts["monitor"].append(h["monitor"][first:])
-        wall += res.wall_time
-        compile_t += res.compile_time
-        done += int(res.iterations)
-        X = res.x
-        if res.status_name != "max_iters":
-            status = res.status_name
-            break
-    return X, done, status, wall, compile_t, {key: np.concatenate(v) for key, v in parts.items()}
-
-
-def _staged(progress, offset: int, elapsed: float, stage: int, n_stages: int, final: bool = True):
-    """``progress`` with a stage's reports shifted to the whole solve: iterations and seconds of the earlier
-    stages added, the stage and the number of stages set; ``final``: this run may end the solve (the last
-    stage's run to ``ftol``, not its stop for a saddle check)."""
-
-    def report(info):
-        if (stage < n_stages - 1 or not final) and info.remaining == 0.0:  # an intermediate end is not the end
-            info = info._replace(remaining=None)
-        progress(info._replace(iteration=offset + info.iteration, elapsed=elapsed + info.elapsed, stage=stage,
-                               n_stages=n_stages, method="block"))
-
-    return report
 
 
 def _column_progress(callback, progress, k: int, max_iters: int):
@@ -214,6 +155,14 @@ class BlockCMM(_SmoothedSolver):
       iterations, so they only settle the modes' arrangement (``docs/benchmarks/cmm.md``: iterations to
       ADMM's best 337 → 67 on camelhead, k = 10); the last runs to ``gtol`` or ``ftol`` (relative
       decrease over 20 iterations — the gradient can stall above gtol in the rounding regime).
+    starts: the number of starts screened (1–64; ``objectives.cmm.block_stages``): the given start and
+      ``starts − 1`` rotations ``X0·Q`` of it (random orthogonal ``Q``, seeded by ``seed``: the same span) each go
+      through the intermediate stages; the one with the lowest true objective there goes on to the last stage
+      (``params["screened_starts"]``: each start's iterations, objective and status). Only for the ``"eigen"`` and
+      ``"random"`` starts — an array start is used as given — and k > 1. Why: from the eigenbasis the
+      solve keeps the symmetric arrangements of the eigenfunctions and ends in a worse minimum on several
+      meshes (k = 10, uniform weights: bumpy.off at μ = 2λ 1.1 % above ADMM's; ``docs/benchmarks/starts.md``); the
+      intermediate stages settle the arrangement, and cost ~60 iterations of the 300–2400 of a solve.
     optimizer: ``"cg"`` (Riemannian CG) or ``"lbfgs"`` (each active-set round restarts its memory).
     preconditioner: ``"shifted"`` (``(W + σA)⁻¹``, one factorisation) or ``"active_set"``
       (``W + σA`` plus the ℓ1 curvature of the entries pinned at zero, rebuilt every ``refresh`` iterations).
@@ -243,6 +192,7 @@ class BlockCMM(_SmoothedSolver):
 
     name: ClassVar[str] = "block"
     continuation: int = 4
+    starts: int = 4
     ftol: float = 1e-7
     stage_ftol: float = 3e-4
     stage_window: int = 5
@@ -265,6 +215,7 @@ class BlockCMM(_SmoothedSolver):
         _require(self.polish is None or self.preconditioner == "shifted",
                  "polish='tr' needs preconditioner='shifted' (it reuses the factor of W + σA)")
         _check_int("saddle_checks", self.saddle_checks, 0)
+        _check_int("starts", self.starts, 1, 64)
         _check_number("saddle_ftol", self.saddle_ftol, 0)
         _check_number("saddle_tol", self.saddle_tol, 0)
         try:
@@ -289,91 +240,70 @@ class BlockCMM(_SmoothedSolver):
         chunks (iterations over all stages, the stage), ``stop`` checked between them: an interrupted stage
         ends the solve (status ``interrupted``, the current iterate)."""
         _no_callback(self, callback)
-        stop_signal = stop
         # the active-set preconditioner is a host callback (never cached): exact shapes for it
         growth = self.bucket_growth if self.preconditioner == "shifted" else None
         padded = PaddedProblem.build(W, a, growth)
         sigma, dt, energy, schedule, (ratio_e, ratio_d) = self._setup(W, a, mu, start, weighting, dtype, padded)
-        P, t_factor = _shifted_inverse(W, a, sigma, dt, padded) if self.preconditioner == "shifted" else (None, 0.0)
+        if self.preconditioner == "shifted":
+            P, t_factor = _shifted_inverse(W, a, sigma, dt, padded)
+        else:
+            P, t_factor = ActiveSetPreconditioner(W, a, sigma, mu, l1_weights_np(a, weighting), schedule[0]), 0.0
         manifold = stiefel.GeneralizedStiefel(padded.a, k, retraction="cholesky", dtype=dtype)
         # A-orthonormalised on the host (no compilation), then padded with zero rows
-        X = host_array(padded.pad(orthonormalize(np.asarray(start.X0, dtype=np.float64), a)), dt)
-        iters, wall, compile_t, status = 0, t_factor, 0.0, "converged"
-        times, values, true_values = [], [], []
-        active, checks = None, []
-        for stage, s in enumerate(schedule):
-            if iters >= self.max_iters:  # the total is spent: the remaining stages are skipped
-                status = "max_iters"
+        X0 = orthonormalize(np.asarray(start.X0, dtype=np.float64), a)
+        candidates = stages.rotated_starts(X0, 1 if start.kind == "array" else self.starts, seed)
+        energy_at = lambda s: energy.with_params(eps=s * ratio_e, delta=s * ratio_d)  # noqa: E731
+        n_stages = len(schedule)
+        # the screen: the intermediate stages (a first run of the only stage when there is one and several starts)
+        widths = list(enumerate(schedule[:-1])) or ([(0, schedule[0])] if len(candidates) > 1 else [])
+        clock, screened = stages.Clock(wall=t_factor), []
+        for X in candidates:
+            trace, before = stages.Trace(), clock.iters
+            X, st = stages.intermediate_stages(self, widths, energy_at, manifold, host_array(padded.pad(X), dt), P,
+                                               clock, trace, n_stages=n_stages, progress=progress, stop_signal=stop)
+            value = trace.true_values[-1] if trace.true_values else float("nan")
+            screened.append(dict(X=X, status=st, trace=trace, iterations=clock.iters - before, objective=float(value)))
+            if st in ("interrupted", "max_iters"):  # the solve ends: the best start screened so far is returned
                 break
-            F = energy.with_params(eps=s * ratio_e, delta=s * ratio_d)
-            last = stage == len(schedule) - 1
-            if P is None:
-                if active is None:
-                    active = ActiveSetPreconditioner(W, a, sigma, mu, l1_weights_np(a, weighting), s)
-                active.set_width(s)
-            st, tight = None, not last or self.saddle_checks == 0
-            while True:
-                # intermediate stages only need the arrangement of the modes: stop once they stall; the last
-                # stops at the looser saddle_ftol while it has not passed a saddle check (cmm_saddle)
-                if not last:
-                    stop = dict(ftol=max(self.ftol, self.stage_ftol), ftol_window=self.stage_window)
-                else:
-                    stop = dict(ftol=self.ftol if tight else max(self.ftol, self.saddle_ftol))
-                report = None if progress is None else _staged(progress, iters, wall, stage, len(schedule), tight)
-                X, it_stage, st, t_run, t_compile, h = _block_rounds(
-                    F, manifold, X, P if P is not None else active, gtol=self.gtol, max_iters=self.max_iters,
-                    budget=self.max_iters - iters, refresh=self.refresh, optimizer=self.optimizer,
-                    progress=report, stop=stop_signal, **stop)
-                iters += it_stage
-                first = 0 if not times else 1  # a later run's entry 0 is the previous run's last iterate
-                true_values.extend(list(h["monitor"][first:]))
-                times.extend(list(wall + h["time"][first:]))
-                values.extend(list(h["value"][first:]))
-                wall += t_run
-                compile_t += t_compile
-                if not last or st != "converged":
-                    break
-                # the last check is kept for the point where the tight test stops (a verified end)
-                if len(checks) < self.saddle_checks - (0 if tight else 1):
-                    X_new, record, t_run, t_compile = cmm_saddle.check(
-                        F, manifold, X, P, width=max(s * ratio_e, s * ratio_d), threshold=self.saddle_tol * sigma)
-                    wall += t_run
-                    compile_t += t_compile
-                    checks.append(dict(record, iteration=iters))
-                    if X_new is not None:  # stepped off a saddle: resume (the stall test loose again)
-                        X, tight = X_new, False
-                        if iters >= self.max_iters:
-                            st = "max_iters"
-                            break
-                        continue
-                if tight:
-                    break
-                tight = True  # no saddle where the loose test stopped: on to the final tolerance
-            # an intermediate stage whose line search failed (the round-off floor of its smoothing) hands its
-            # iterate to the next stage; the solve's status is the last stage's or a spent budget's
-            if st != "converged" and (last or st != "line_search_failed"):
-                status = st
-            if st == "interrupted":
-                break
+        chosen = min(range(len(screened)), key=lambda j: _screen_rank(screened[j]))
+        pick = screened[chosen]
+        X, status, trace, checks = pick["X"], pick["status"], pick["trace"], []
+        if status == "converged" and clock.iters >= self.max_iters:
+            status = "max_iters"
+        if status == "converged":
+            s = schedule[-1]
+            X, status, checks = stages.last_stage(self, energy_at(s), s, max(s * ratio_e, s * ratio_d), sigma, manifold,
+                                                  X, P, clock, trace, stage=n_stages - 1, progress=progress,
+                                                  stop_signal=stop)
         polished = None
         if self.polish == "tr" and status == "converged":
             X, polished, t_run, t_compile = cmm_newton.polish(
-                F, manifold, X, P.solve, host_array(padded.a, dt), sigma, gtol=self.polish_gtol,
+                energy_at(schedule[-1]), manifold, X, P.solve, host_array(padded.a, dt), sigma, gtol=self.polish_gtol,
                 max_iters=self.polish_iters)
-            wall += t_run
-            compile_t += t_compile
-            times.append(wall)
-            values.append(polished["value"])
-            true_values.append(float(F.true_value(X)))
-        history = {"time": np.asarray(times), "smoothed_objective": np.asarray(values),
-                   "objective": np.asarray(true_values)}
+            clock.wall += t_run
+            clock.compile += t_compile
+            trace.times.append(clock.wall)
+            trace.values.append(polished["value"])
+            trace.true_values.append(float(energy_at(schedule[-1]).true_value(X)))
+        history = {"time": np.asarray(trace.times), "smoothed_objective": np.asarray(trace.values),
+                   "objective": np.asarray(trace.true_values)}
         Psi = orthonormalize(padded.unpad(np.asarray(X, dtype=np.float64)), a)  # exact A-orthonormality
         info = {"padded_size": padded.size}
+        if len(candidates) > 1:
+            info["screened_starts"] = [dict(start=j, status=c["status"], iterations=c["iterations"], objective=c["objective"],
+                                   chosen=j == chosen) for j, c in enumerate(screened)]
         if polished is not None:
             info["polish_run"] = polished
         if checks:
             info["saddles"] = checks
-        return SolverRun(Psi, iters, status, wall, compile_t, history, info)
+        return SolverRun(Psi, clock.iters, status, clock.wall, clock.compile, history, info)
+
+
+def _screen_rank(c: dict) -> tuple:
+    """A screened start's rank: screens that finished first (``converged``), then the lowest true objective
+    (NaN last)."""
+    value = c["objective"]
+    return (c["status"] != "converged", value if np.isfinite(value) else np.inf)
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)

@@ -17,6 +17,7 @@ option                      API                                         default
 ``--smoothing``, ``--eps``, ``--delta`` ``BlockCMM(smoothing=, eps=, delta=)`` f6 (huber), 1e-3
 ``--continuation``, ``--continuation-start`` ``BlockCMM(continuation=, continuation_start=)``
 ``--optimizer``, ``--preconditioner`` ``BlockCMM(optimizer=, preconditioner=)`` cg, shifted
+``--starts``                ``BlockCMM(starts=)``                       4 (eigen/random starts)
 ``--gtol``, ``--max-iters`` every solver's ``gtol`` / ``max_iters``
 ``--finish`` / ``--no-finish`` ``compressed_modes(finish=SupportFinish() / None)`` finish (exact zeros)
 =========================== =========================================== ==============================
@@ -47,7 +48,7 @@ AREAS = ("lumped", "barycentric", "voronoi", "mixed", "fem", "uniform", "degree"
 #: options of the manifold solvers only (dest → the methods that have it)
 _MANIFOLD = ("block", "sequential")
 _ONLY = {"eps": _MANIFOLD, "delta": _MANIFOLD, "continuation": _MANIFOLD, "continuation_start": _MANIFOLD,
-         "optimizer": ("block",), "preconditioner": ("block",)}
+         "optimizer": ("block",), "preconditioner": ("block",), "starts": ("block",)}
 
 
 def checked(parse: Callable[[str], Any]) -> Callable[[str], Any]:
@@ -228,6 +229,10 @@ def add_cmm_options(p: argparse.ArgumentParser, *, single_smoothing: bool) -> No
                    help="smoothing stages from --continuation-start down to ε, δ (block default 4, sequential 1)")
     p.add_argument("--continuation-start", type=_positive_type, default=None, metavar="WIDTH",
                    help="width of the first continuation stage (default 0.1)")
+    p.add_argument("--starts", type=checked(bounded_int(1, 64)), default=None, metavar="N",
+                   help="block solver: starts screened through the intermediate smoothing stages — the eigen (or "
+                        "random) start and N − 1 rotations of it; the lowest goes on (default 4; 1: the start alone; "
+                        "a --start file is used as given)")
     p.add_argument("--optimizer", choices=("cg", "lbfgs"), default=None,
                    help="block solver's method: Riemannian CG (default) or L-BFGS")
     p.add_argument("--preconditioner", choices=("shifted", "active_set"), default=None,
@@ -252,7 +257,7 @@ def solver_from_args(args: argparse.Namespace, method: str, smoothing: str, *, l
 
     Every solver gets ``--max-iters``; the manifold solvers ``smoothing``, ``--gtol``, ``--eps``, ``--delta``,
     ``--continuation``, ``--continuation-start`` (and ``runtime_smoothing`` for ``compare-smoothings``: one
-    compilation for all smoothings); the block solver ``--optimizer`` and ``--preconditioner``; fast its ``U``."""
+    compilation for all smoothings); the block solver ``--optimizer``, ``--preconditioner`` and ``--starts``; fast its ``U``."""
     from objectives.cmm.solvers import SOLVERS, FastCMM
 
     passed: dict[str, Any] = {"max_iters": args.max_iters}
