@@ -185,6 +185,15 @@ def test_restricted_gradient_and_hessian_along_the_retraction(problem):
     assert d2 == pytest.approx(prob.inner(prob.hess(gram, Phi, lam, xi), xi), rel=1e-4)
 
 
+def test_stationarity_stops_at_its_round_off_floor(problem, finished):
+    """At a finished (stationary) Φ the minimum over Λ is reached in a few steps; then φ has no measurable decrease
+    left and ∂φ/∂Λ only its round-off: the method stops there (it ran all 50 iterations, 22 backtracks each on
+    fandisk's last finish iterates, 40 % of that finish's time)."""
+    W, a, w, mu, _ = problem
+    stat = l1_stationarity(W, a, w, mu, finished.Psi)
+    assert stat.relative < 1e-10 and stat.iterations <= 10, (stat.relative, stat.iterations)
+
+
 def test_finish_gives_exact_zeros_orthonormal_stationary(problem, finished):
     W, a, w, mu, smooth = problem
     Phi = finished.Psi

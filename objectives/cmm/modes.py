@@ -6,9 +6,9 @@ diagnostics. The method is a solver object (``objectives.cmm.solvers``), each ho
 its own options:
 
 * ``BlockCMM()`` (default) — the smoothed energy over the whole matrix with Riemannian CG
-  (``stiefel.minimize``), preconditioned by ``(W + σA)⁻¹`` (σ = λ_{k−1}), started from the first
-  k eigenfunctions, with continuation on the smoothing parameter (ε, δ from 0.1 to the target in
-  4 warm-started stages, the first three stopped early);
+  (``stiefel.minimize``), preconditioned by ``(W + σA)⁻¹`` (σ = λ_{k−1}), with continuation on the
+  smoothing parameter (ε, δ from 0.1 to the target in 4 warm-started stages, the first three stopped
+  early); the first k eigenfunctions and 3 rotations of them go through those three, the lowest on;
 * ``SequentialCMM()`` — thesis Algorithm 6 (``stiefel.minimize_sequential``), same
   preconditioner, column by column (continuation only when asked for);
 * ``ADMMCMM(variant="exact" | "thesis")`` / ``SequentialADMMCMM()`` — the ADMM baseline
@@ -240,7 +240,8 @@ def compressed_modes(
       solver: ``BlockCMM`` (default), ``SequentialCMM``, ``ADMMCMM``, ``SequentialADMMCMM`` or
         ``FastCMM(U)`` (``objectives.cmm.solvers``), with its options.
       weighting: ``"area"`` or ``"uniform"`` ℓ1 weights (docs/maths.md §4).
-      start: ``"eigen"`` (first k eigenfunctions; ``FastCMM``: the restricted eigenbasis),
+      start: ``"eigen"`` (first k eigenfunctions — ``BlockCMM`` screens rotations of them too, its ``starts``;
+        ``FastCMM``: the restricted eigenbasis),
         ``"random"`` (``seed``), or an ``(n, k)`` array (not for ``FastCMM``). The eigenpairs are
         computed only when the start or the solver (default shift σ, ADMM's ρ) uses them, once.
       seed: random seed (random starts).

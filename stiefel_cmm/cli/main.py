@@ -153,8 +153,9 @@ def build_parser() -> argparse.ArgumentParser:
     o.add_cmm_options(p, single_smoothing=True)
     p.add_argument("--method", choices=o.METHODS, default="block", help="solver (default block)")
     p.add_argument("--start", type=_checked(o.start_spec), default="eigen", metavar="{eigen,random,FILE}",
-                   help="start: the first k eigenfunctions (default), random, or a .npy/.npz file with an (n, k) "
-                        "array (e.g. an earlier run's modes.npz)")
+                   help="start: the first k eigenfunctions (default; the block method screens --starts rotations of "
+                        "them), random, or a .npy/.npz file with an (n, k) array (e.g. an earlier run's modes.npz), "
+                        "used as given")
     p.add_argument("--samples", type=_positive_int, default=None,
                    help="local functions for --method fast (default: max(10k, n/10))")
     p.add_argument("--no-png", action="store_true", help="skip the PNG contact sheet")
