@@ -281,6 +281,34 @@ def test_a_failed_start_is_retried_from_the_next_threshold(problem, monkeypatch)
     assert one.status != "converged" and len(one.attempts) == 1
 
 
+@pytest.mark.parametrize("limit", [None, 10**9])
+def test_zeros_freed_and_sent_straight_back_stop_a_start_as_cycling(problem, finished, monkeypatch, limit):
+    """Zeros that the violation test frees but every step sends out of the support again (forced: 10 zeros of the
+    minimiser reported as violators at every step) stop the start after ``CYCLE_LIMIT`` steps, status
+    ``cycling``; without the rule the start goes on adding and dropping them."""
+    import objectives.cmm.restricted as restricted
+    import objectives.cmm.support_finish as finish
+
+    W, a, w, mu, smooth = problem
+    fake = np.zeros(finished.Psi.shape, dtype=bool)
+    fake[tuple(np.argwhere(finished.Psi == 0.0)[:10].T)] = True
+    real = restricted._Restricted.violations
+
+    def violations(self, Phi, WPhi, margin):
+        _, _, v = real(self, Phi, WPhi, margin)
+        return fake & (self.mask == 0) & (Phi == 0.0), 1.0, v  # an excess far above ADD_RATIO × the gradient
+
+    monkeypatch.setattr(restricted._Restricted, "violations", violations)
+    if limit is not None:
+        monkeypatch.setattr(finish, "CYCLE_LIMIT", limit)
+    fr = finish_support(W, a, w, mu, smooth.modes, SupportFinish(max_newton=40, retry_thresholds=()))
+    steps, status = fr.attempts[0]["newton_iterations"], fr.attempts[0]["status"]
+    if limit is None:  # the first steps drop the fake zeros from the start's support, then they cycle
+        assert finish.CYCLE_LIMIT <= steps <= 10 and status == "cycling" == fr.status, (steps, status)
+    else:
+        assert steps > 15 and status != "cycling", (steps, status)
+
+
 def test_support_stats():
     X = np.array([[1.0, 0.0], [0.0, 0.0], [2.0, -1.0]])
     st = support_stats(X, np.array([1.0, 1.0, 2.0]))
