@@ -197,6 +197,29 @@ def test_block_screens_rotated_starts_and_goes_on_from_the_lowest(hand, hand_blo
         np.testing.assert_allclose(U @ (U.T @ (hand.A @ X)), X, atol=1e-10)
 
 
+def test_block_screen_interrupted_or_out_of_budget_ends_the_solve(hand):
+    """A stop while the second start is screened ends the solve there (status ``interrupted``, no last stage), though
+    the first start, screened in full, is the one returned — also when the stop answers True only once; a budget
+    spent in the screen ends it as ``max_iters``."""
+    mu = HAND_MU * hand.n
+    pulse, stages_seen = [], []
+
+    def progress(info):
+        if stages_seen and info.stage < stages_seen[-1] and not stages_seen.count(-1):  # the next start began
+            pulse.append(True)
+            stages_seen.append(-1)
+        stages_seen.append(info.stage)
+
+    res = compressed_modes(hand, 6, mu, weighting="uniform", finish=None, progress=progress,
+                           stop=lambda: bool(pulse and pulse.pop()))
+    screened = res.params["screened_starts"]
+    assert res.status == "interrupted" and len(screened) == 2 and screened[1]["status"] == "interrupted"
+    assert res.iterations == sum(c["iterations"] for c in screened)  # nothing after the screen
+    spent = compressed_modes(hand, 6, mu, solver=BlockCMM(max_iters=70), weighting="uniform", finish=None)
+    assert spent.status == "max_iters" and spent.iterations == 70
+    assert spent.params["screened_starts"][-1]["status"] == "max_iters"
+
+
 def test_block_screen_with_one_stage_and_a_random_start(hand):
     """One smoothing stage: each start's screen is a first run of that stage with the intermediate stop; a random
     start is screened with its rotations too; k = 1 has nothing to rotate."""

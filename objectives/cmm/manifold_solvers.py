@@ -268,7 +268,9 @@ class BlockCMM(_SmoothedSolver):
         chosen = min(range(len(screened)), key=lambda j: _screen_rank(screened[j]))
         pick = screened[chosen]
         X, status, trace, checks = pick["X"], pick["status"], pick["trace"], []
-        if status == "converged" and clock.iters >= self.max_iters:
+        if screened[-1]["status"] in ("interrupted", "max_iters"):  # whichever start is returned, the solve ends
+            status = screened[-1]["status"]
+        elif status == "converged" and clock.iters >= self.max_iters:
             status = "max_iters"
         if status == "converged":
             s = schedule[-1]
@@ -290,8 +292,8 @@ class BlockCMM(_SmoothedSolver):
         Psi = orthonormalize(padded.unpad(np.asarray(X, dtype=np.float64)), a)  # exact A-orthonormality
         info = {"padded_size": padded.size}
         if len(candidates) > 1:
-            info["screened_starts"] = [dict(start=j, status=c["status"], iterations=c["iterations"], objective=c["objective"],
-                                   chosen=j == chosen) for j, c in enumerate(screened)]
+            info["screened_starts"] = [dict(start=j, status=c["status"], iterations=c["iterations"],
+                                            objective=c["objective"], chosen=j == chosen) for j, c in enumerate(screened)]
         if polished is not None:
             info["polish_run"] = polished
         if checks:
