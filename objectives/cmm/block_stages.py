@@ -154,9 +154,7 @@ def intermediate_stages(solver, widths, energy_at, manifold, X, P, clock: Clock,
             P.set_width(s)
         report = None if progress is None else _staged(progress, clock.iters, clock.wall, stage, n_stages, False)
         X, st = _run(solver, F, manifold, X, P, clock, trace, report, stop_signal, **stop)
-        if st not in ("converged", "line_search_failed", "max_iters"):
-            return X, st
-        if st == "max_iters" and clock.iters >= solver.max_iters:
+        if st not in ("converged", "line_search_failed"):  # max_iters: the run was given all the budget left
             return X, st
     return X, "converged"
 
